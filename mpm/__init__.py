@@ -1,0 +1,37 @@
+"""mpm: a differentiable MLS-MPM solver for dry sand on a ramp, in JAX.
+
+Typical use::
+
+  import mpm
+  scene = mpm.Scene.load("scene.json")
+  result = mpm.simulate(scene)          # positions [T, N, 2]
+
+Pure building blocks (``mpm.solver.rollout``, ``mpm.setup``) are for batching,
+``jax.grad`` and custom drivers. This package imports only jax and numpy.
+"""
+
+from mpm.geometry import KINEMATIC_TYPES
+from mpm.geometry import OBSTACLE_TYPE
+from mpm.geometry import RAMP_TYPE
+from mpm.geometry import SAND_TYPE
+from mpm.geometry import boundary_particles
+from mpm.geometry import granular_particles
+from mpm.sampler import sample_scene
+from mpm.scene import Scene
+from mpm.simulation import SimulationError
+from mpm.simulation import SimulationResult
+from mpm.simulation import Setup
+from mpm.simulation import setup
+from mpm.simulation import simulate
+from mpm.simulation import simulate_batch
+from mpm.simulation import simulate_setups
+from mpm.solver import MPMState
+from mpm.solver import SimParams
+from mpm.solver import rollout
+
+__all__ = [
+    "KINEMATIC_TYPES", "OBSTACLE_TYPE", "RAMP_TYPE", "SAND_TYPE",
+    "MPMState", "Scene", "Setup", "SimParams", "SimulationError",
+    "SimulationResult", "boundary_particles", "granular_particles", "rollout",
+    "sample_scene", "setup", "simulate", "simulate_batch", "simulate_setups",
+]

@@ -1,0 +1,136 @@
+"""Boundary conditions on grid nodes: Coulomb friction with separation.
+
+Solids (ramp and obstacles) and the domain's walls act on grid velocities
+through signed distances phi (negative inside). At a node, a velocity with an
+inward normal part v_n < 0 loses it, and its tangential part shrinks by
+mu |v_n| (stopping when that exceeds it); a velocity leaving the surface is
+left alone, so sand can separate. The condition acts fully at phi <= -dx/2, not
+at all at phi >= dx/2, and linearly between: the surface sits at phi = 0 on
+average and moving it (an obstacle's x) changes the result smoothly.
+
+Only nodes within reach of sand get a condition: the ``BoundaryField`` lists
+them (a band along the surfaces, not the whole grid), so this costs in
+proportion to the length of the boundary.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mpm import _pytree
+from mpm import geometry
+from mpm import transfer
+
+# Nodes deeper than this in a solid [cells] are never reached by sand: a
+# particle that penetrates half a cell has stencil nodes 2 cells deep.
+_DEPTH_CELLS = 3.0
+
+
+@_pytree.pytree_dataclass
+class BoundaryField:
+  """Boundary data of the B nodes that need it.
+
+  Attributes:
+    index: int32 [B] flat node indices (unique).
+    solid_normal: [B, 2] outward unit normal of the nearest solid.
+    solid_weight: [B] how fully the solid condition acts, in [0, 1].
+    wall_normal: [B, 2] inward normals (+-1, 0) and (0, +-1) of the box walls.
+    wall_weight: [B, 2] weights of the x-wall and the y-wall conditions.
+  """
+  index: jax.Array
+  solid_normal: jax.Array
+  solid_weight: jax.Array
+  wall_normal: jax.Array
+  wall_weight: jax.Array
+
+
+def _soft_weight(phi, dx):
+  return jnp.clip(0.5 - phi / dx, 0.0, 1.0)
+
+
+def _wall_distances(p, width, height):
+  """Signed distance to the nearer x-wall and y-wall, and the inward signs."""
+  x, y = p[..., 0], p[..., 1]
+  dist_x = jnp.minimum(x, width - x)
+  dist_y = jnp.minimum(y, height - y)
+  sign_x = jnp.where(x < width - x, 1.0, -1.0)
+  sign_y = jnp.where(y < height - y, 1.0, -1.0)
+  return dist_x, dist_y, sign_x, sign_y
+
+
+def select_nodes(spec: transfer.GridSpec, width: float, height: float,
+                 ramp: geometry.RampParams,
+                 obstacles: tuple[geometry.ObstacleParams, ...],
+                 margin_cells: float = 1.0) -> np.ndarray:
+  """Indices int32 [B] of the nodes that can need a boundary condition.
+
+  Host-side (not jittable): nodes whose condition weight is non-zero, within
+  ``margin_cells`` extra cells so that small moves of an obstacle stay
+  covered, and not buried deeper than sand can reach.
+  """
+  p = jnp.asarray(spec.node_positions(), jnp.float32)
+  phi = np.asarray(geometry._solid_sdf(ramp, obstacles, p)) / spec.dx  # pylint: disable=protected-access
+  dist_x, dist_y, _, _ = map(np.asarray, _wall_distances(p, width, height))
+  near = ((phi < 0.5 + margin_cells) |
+          (dist_x / spec.dx < 0.5 + margin_cells) |
+          (dist_y / spec.dx < 0.5 + margin_cells))
+  reachable = phi > -_DEPTH_CELLS - margin_cells
+  return np.flatnonzero(near & reachable).astype(np.int32)
+
+
+def make_field(spec: transfer.GridSpec, index: jax.Array, width: float,
+               height: float, ramp: geometry.RampParams,
+               obstacles: tuple[geometry.ObstacleParams, ...]) -> BoundaryField:
+  """Boundary data at nodes ``index`` [B]; differentiable in the geometry."""
+  p = (jnp.asarray([spec.origin]) + spec.dx * jnp.stack(
+      [index // spec.shape[1], index % spec.shape[1]], -1).astype(jnp.float32))
+  sdf = lambda q: geometry.solid_sdf(ramp, obstacles, q)
+  phi, grad = jax.vmap(jax.value_and_grad(sdf))(p)
+  normal = grad * jax.lax.rsqrt(jnp.maximum(jnp.sum(grad**2, -1), 1e-12))[:, None]
+  dist_x, dist_y, sign_x, sign_y = _wall_distances(p, width, height)
+  return BoundaryField(
+      index=index,
+      solid_normal=normal,
+      solid_weight=_soft_weight(phi, spec.dx),
+      wall_normal=jnp.stack([sign_x, sign_y], -1),
+      wall_weight=jnp.stack([_soft_weight(dist_x, spec.dx),
+                             _soft_weight(dist_y, spec.dx)], -1))
+
+
+def coulomb(v, normal, weight, mu):
+  """Coulomb friction with separation at surfaces of unit normal ``normal``.
+
+  Args:
+    v: [B, 2] node velocities (m/s).
+    normal: [B, 2] outward unit normals.
+    weight: [B] in [0, 1], how fully the condition acts.
+    mu: friction coefficient.
+
+  Returns:
+    [B, 2] velocities after the condition.
+  """
+  # Written with reductions over the size-2 axis on purpose: they split the
+  # three conditions into separate loops, while one fused expression of all
+  # three makes XLA's CPU emitter re-evaluate shared terms (measured 20x
+  # slower).
+  v_n = jnp.sum(v * normal, -1)                       # < 0: into the surface
+  v_t = v - v_n[:, None] * normal
+  t_sq = jnp.sum(v_t * v_t, -1)
+  t_norm = jnp.sqrt(jnp.where(t_sq > 0, t_sq, 1.0))
+  scale = jnp.maximum(0.0, 1.0 + mu * v_n / t_norm)
+  into = v_n < 0                                      # separating: untouched
+  projected = jnp.where(into[:, None], scale[:, None] * v_t, v)
+  return v + weight[:, None] * (projected - v)
+
+
+def apply(field: BoundaryField, grid_v: jax.Array, boundary_friction,
+          wall_friction) -> jax.Array:
+  """Applies solid and wall conditions to node velocities ``grid_v`` [G, 2]."""
+  v = grid_v[field.index]
+  v = coulomb(v, field.solid_normal, field.solid_weight, boundary_friction)
+  zeros = jnp.zeros_like(field.wall_normal[:, :1])
+  v = coulomb(v, jnp.concatenate([field.wall_normal[:, :1], zeros], -1),
+              field.wall_weight[:, 0], wall_friction)
+  v = coulomb(v, jnp.concatenate([zeros, field.wall_normal[:, 1:]], -1),
+              field.wall_weight[:, 1], wall_friction)
+  return grid_v.at[field.index].set(v, unique_indices=True)

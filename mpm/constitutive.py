@@ -1,0 +1,158 @@
+"""Dry sand: Hencky elasticity with a Drucker-Prager return mapping in 2D.
+
+Follows Klar et al. (2016), "Drucker-Prager elastoplasticity for sand
+animation", with the volume-correction term of Tampubolon et al. (2017). The
+elastic deformation gradient F has the Hencky (logarithmic) strain
+
+.. math:: \\epsilon = \\tfrac12 \\log(F F^T), \\qquad
+   \\tau = 2 \\mu \\epsilon + \\lambda \\operatorname{tr}(\\epsilon) I,
+
+where tau is the Kirchhoff stress. After each update of F the trial strain is
+projected onto the cone ||dev tau|| <= -alpha tr(tau) (no cohesion):
+
+* expansion (tr eps + v_c >= 0): the sand separates; F becomes its rotation
+  (stress free) and v_c remembers the extra volume, which compression must
+  take up before stress returns (the volume correction);
+* inside the cone (delta_gamma <= 0): elastic, F unchanged;
+* otherwise eps -> eps - delta_gamma dev(eps) / ||dev(eps)||.
+
+Klar et al. write the projection on the singular values of F. Every step is
+an isotropic function of the left stretch, so here it is written with the
+tensors themselves: ``log_strain`` evaluates log(F F^T) in closed form and the
+cone projection becomes F <- exp(-delta_gamma n) F with n the unit deviatoric
+strain. The result is the same (``project_principal`` is the singular-value
+form, kept as the reference the tests compare against) but smooth at
+F = I, where every particle starts and where gradients through an SVD are
+undefined.
+
+All functions act per particle on leading batch dimensions. Units: Pa for
+moduli and stress, radians for angles.
+"""
+
+import jax
+import jax.numpy as jnp
+
+from mpm import linalg
+
+_SQRT2 = 1.4142135623730951
+
+
+def lame_parameters(youngs_modulus, poisson_ratio):
+  """Lamé parameters (mu, lambda) [Pa] from E [Pa] and nu."""
+  mu = youngs_modulus / (2 * (1 + poisson_ratio))
+  lam = youngs_modulus * poisson_ratio / ((1 + poisson_ratio) *
+                                          (1 - 2 * poisson_ratio))
+  return mu, lam
+
+
+def friction_coefficient(friction_angle):
+  """Drucker-Prager alpha for a 2D (plane-strain) Mohr-Coulomb angle [rad].
+
+  In 2D the Mohr-Coulomb condition on the principal stresses,
+  |s1 - s2| <= -(s1 + s2) sin(phi), is exactly ||dev tau||_F <= -alpha tr(tau)
+  with alpha = sin(phi) / sqrt(2). (Klar et al.'s sqrt(2/3) 2 sin(phi) /
+  (3 - sin(phi)) fits the 3D cone instead; at 35 degrees the two differ by 5%.)
+  """
+  return jnp.sin(friction_angle) / _SQRT2
+
+
+def _atanh_ratio(z2):
+  """atanh(z) / z as a smooth function of z^2 in [0, 1)."""
+  small = z2 < 1e-2
+  series = 1 + z2 * (1 / 3 + z2 * (1 / 5 + z2 * (1 / 7 + z2 / 9)))
+  z = jnp.sqrt(jnp.where(small, 1.0, z2))
+  return jnp.where(small, series, jnp.arctanh(z) / z)
+
+
+def log_strain(F):
+  """Hencky strain of deformation gradients F [..., 2, 2].
+
+  For the symmetric b = F F^T with mean eigenvalue m and half-gap r,
+  log(b) = log(det b) / 2 I + (atanh(r/m) / r) (b - m I), which needs only r^2.
+
+  Returns:
+    trace: [...] tr(eps) = log|det F| (volumetric log strain).
+    dev: [..., 2] deviatoric strain (d0, d1), eps_dev = [[d0, d1], [d1, -d0]].
+  """
+  f00, f01, f10, f11 = F[..., 0, 0], F[..., 0, 1], F[..., 1, 0], F[..., 1, 1]
+  b00 = f00 * f00 + f01 * f01
+  b11 = f10 * f10 + f11 * f11
+  b01 = f00 * f10 + f01 * f11
+  m = (b00 + b11) / 2
+  h = (b00 - b11) / 2
+  det = jnp.maximum(jnp.abs(f00 * f11 - f01 * f10), 1e-6)
+  z2 = jnp.clip((h * h + b01 * b01) / (m * m), 0.0, 1.0 - 1e-6)
+  c = _atanh_ratio(z2) / (2 * m)
+  return jnp.log(det), jnp.stack([c * h, c * b01], -1)
+
+
+def kirchhoff_stress(F, mu, lam):
+  """Kirchhoff stress tau [..., 2, 2] (Pa) of Hencky elasticity."""
+  trace, dev = log_strain(F)
+  p = (mu + lam) * trace  # 2 mu tr/2 + lam tr: the isotropic part in 2D
+  s0, s1 = 2 * mu * dev[..., 0], 2 * mu * dev[..., 1]
+  return jnp.stack([jnp.stack([p + s0, s1], -1),
+                    jnp.stack([s1, p - s0], -1)], -2)
+
+
+def project(F, volume_correction, mu, lam, alpha):
+  """Drucker-Prager return mapping with volume correction (tensor form).
+
+  Args:
+    F: [..., 2, 2] trial elastic deformation gradients.
+    volume_correction: [...] v_c, accumulated log volume of separation.
+    mu, lam: Lamé parameters [Pa]; alpha: see ``friction_coefficient``.
+
+  Returns:
+    (F, volume_correction) after projection, same shapes.
+  """
+  trace, dev = log_strain(F)
+  trace_c = trace + volume_correction
+  dev_sq = dev[..., 0]**2 + dev[..., 1]**2
+  dev_norm = _SQRT2 * jnp.sqrt(jnp.where(dev_sq > 0, dev_sq, 1.0))
+  dev_norm = jnp.where(dev_sq > 0, dev_norm, 0.0)  # ||dev eps||_F
+  delta_gamma = dev_norm + (lam + mu) / mu * alpha * trace_c
+  expand = trace_c >= 0
+  on_cone = jnp.logical_and(~expand, delta_gamma > 0)
+
+  # Cone: F <- exp(-delta_gamma n) F; n has eigenvalues +-1/sqrt(2).
+  a = jnp.where(on_cone, delta_gamma, 0.0) / _SQRT2
+  k = -jnp.sinh(a) * _SQRT2 / jnp.where(dev_norm > 0, dev_norm, 1.0)
+  e00 = jnp.cosh(a) + k * dev[..., 0]
+  e11 = jnp.cosh(a) - k * dev[..., 0]
+  e01 = k * dev[..., 1]
+  cone = jnp.stack([
+      jnp.stack([e00 * F[..., 0, 0] + e01 * F[..., 1, 0],
+                 e00 * F[..., 0, 1] + e01 * F[..., 1, 1]], -1),
+      jnp.stack([e01 * F[..., 0, 0] + e11 * F[..., 1, 0],
+                 e01 * F[..., 0, 1] + e11 * F[..., 1, 1]], -1)], -2)
+
+  # Expansion: F <- R, the rotation of the polar decomposition F = V R.
+  c = F[..., 0, 0] + F[..., 1, 1]
+  s = F[..., 1, 0] - F[..., 0, 1]
+  norm = jnp.sqrt(jnp.maximum(c * c + s * s, 1e-30))
+  c, s = c / norm, s / norm
+  rotation = jnp.stack([jnp.stack([c, -s], -1), jnp.stack([s, c], -1)], -2)
+
+  F_new = jnp.where(expand[..., None, None], rotation,
+                    jnp.where(on_cone[..., None, None], cone, F))
+  return F_new, jnp.where(expand, trace_c, 0.0)
+
+
+def project_principal(F, volume_correction, mu, lam, alpha):
+  """Reference: the same return mapping on singular values (Klar et al.).
+
+  Not differentiable at equal singular values; used to check ``project``.
+  """
+  u, sigma, v = linalg.svd2x2(F)
+  eps = jnp.log(jnp.maximum(sigma, 1e-6))
+  trace_c = eps.sum(-1) + volume_correction
+  eps_hat = eps - eps.mean(-1, keepdims=True)
+  norm = jnp.linalg.norm(eps_hat, axis=-1)
+  delta_gamma = norm + (lam + mu) / mu * alpha * trace_c
+  expand = trace_c >= 0
+  on_cone = jnp.logical_and(~expand, delta_gamma > 0)
+  shrink = jnp.where(on_cone, delta_gamma, 0.0) / jnp.maximum(norm, 1e-20)
+  h = jnp.where(expand[..., None], 0.0, eps - shrink[..., None] * eps_hat)
+  F_new = jnp.einsum("...ij,...j,...kj->...ik", u, jnp.exp(h), v)
+  return F_new, jnp.where(expand, trace_c, 0.0)

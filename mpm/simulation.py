@@ -1,0 +1,322 @@
+"""Host-side driver: scene -> initial state, substep count, checked rollout.
+
+This is where concrete decisions are made (particle lattice, substep count,
+which nodes carry boundary conditions, chunking and checking); the numerics
+stay pure in ``mpm.solver``. Shapes: N particles, Nb boundary particles,
+T frames, B scenes in a batch.
+"""
+
+import dataclasses
+import math
+import time
+from typing import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mpm import boundary
+from mpm import constitutive
+from mpm import geometry
+from mpm import scene as scene_lib
+from mpm import solver
+from mpm import transfer
+
+GRAVITY = 9.81  # m/s^2
+
+
+class SimulationError(RuntimeError):
+  """A rollout went non-finite or broke its CFL bound (scene and frame named)."""
+
+  def __init__(self, scene_name: str, frame: int, reason: str):
+    super().__init__(f"scene {scene_name!r}, frame {frame}: {reason}")
+    self.scene_name = scene_name
+    self.frame = frame
+
+
+def wave_speed(material: scene_lib.Material) -> float:
+  """P-wave speed c_p = sqrt((lambda + 2 mu) / rho) [m/s]."""
+  mu, lam = constitutive.lame_parameters(material.youngs_modulus,
+                                         material.poisson_ratio)
+  return math.sqrt((lam + 2 * mu) / material.density)
+
+
+def speed_bound(scene: scene_lib.Scene, x0: np.ndarray) -> float:
+  """Largest speed [m/s] the sand can reach: free fall from its top to the
+  lowest point of the ramp (energy conservation; friction only lowers it)."""
+  lowest = float(np.min(scene.ramp.height(np.linspace(0, scene.domain.width,
+                                                      2001))))
+  drop = float(np.max(x0[:, 1])) - max(lowest, 0.0)
+  return math.sqrt(2 * GRAVITY * max(drop, scene.dx))
+
+
+def substeps_per_frame(scene: scene_lib.Scene, max_speed: float) -> int:
+  """Substeps per frame so that dt <= C dx / (c_p + max|v|)."""
+  dt_max = scene.solver.cfl * scene.dx / (wave_speed(scene.material) +
+                                          max_speed)
+  return max(1, int(math.ceil(scene.frame_dt / dt_max - 1e-9)))
+
+
+_make_field = jax.jit(boundary.make_field, static_argnums=(0, 2, 3))
+
+
+@dataclasses.dataclass(frozen=True)
+class Setup:
+  """Everything a rollout of one scene needs.
+
+  Attributes:
+    scene: the scene.
+    spec: the background grid (static).
+    n_substeps: substeps per frame (static).
+    max_speed: the speed bound [m/s] the substep count was chosen for.
+    state: initial particle state (N particles).
+    params: traced physical parameters.
+    field: boundary conditions on grid nodes.
+    boundary_positions: float32 [Nb, 2] static boundary particles.
+    boundary_types: int32 [Nb].
+  """
+  scene: scene_lib.Scene
+  spec: transfer.GridSpec
+  n_substeps: int
+  max_speed: float
+  state: solver.MPMState
+  params: solver.SimParams
+  field: boundary.BoundaryField
+  boundary_positions: np.ndarray
+  boundary_types: np.ndarray
+
+  @property
+  def n_particles(self) -> int:
+    return int(np.sum(np.asarray(self.state.volume) > 0))
+
+
+def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
+  m = scene.material
+  f32 = lambda v: jnp.asarray(v, jnp.float32)
+  return solver.SimParams(
+      density=f32(m.density), youngs_modulus=f32(m.youngs_modulus),
+      poisson_ratio=f32(m.poisson_ratio),
+      friction_angle=f32(math.radians(m.friction_angle_deg)),
+      boundary_friction=f32(scene.boundary_friction),
+      wall_friction=f32(scene.wall_friction), gravity=f32([0.0, -GRAVITY]),
+      dt=f32(dt), domain=f32([scene.domain.width, scene.domain.height]))
+
+
+def setup(scene: scene_lib.Scene, x0: np.ndarray | None = None) -> Setup:
+  """Builds the initial state and discretisation of ``scene``.
+
+  Args:
+    x0: optional initial positions [N, 2]; default the scene's lattice.
+  """
+  if x0 is None:
+    x0 = geometry.granular_particles(scene)
+  x0 = np.asarray(x0, np.float32)
+  spec = transfer.GridSpec.covering(scene.domain.width, scene.domain.height,
+                                    scene.dx)
+  vmax = speed_bound(scene, x0)
+  n_substeps = substeps_per_frame(scene, vmax)
+  ramp = geometry.ramp_params(scene.ramp)
+  obstacles = tuple(geometry.obstacle_params(o) for o in scene.obstacles)
+  index = boundary.select_nodes(spec, scene.domain.width, scene.domain.height,
+                                ramp, obstacles)
+  field = _make_field(spec, jnp.asarray(index), scene.domain.width,
+                              scene.domain.height, ramp, obstacles)
+  volume = np.full(len(x0), scene.granular.spacing**2, np.float32)
+  state = solver.init_state(jnp.asarray(x0), jnp.asarray(volume))
+  bpos, btype = geometry.boundary_particles(scene)
+  return Setup(scene, spec, n_substeps, vmax, state,
+               sim_params(scene, scene.frame_dt / n_substeps), field, bpos,
+               btype)
+
+
+@dataclasses.dataclass(frozen=True)
+class SimulationResult:
+  """One simulated trajectory.
+
+  Attributes:
+    positions: float32 [T, N, 2]; frame 0 is the initial state.
+    boundary_positions: float32 [Nb, 2]; boundary_types: int32 [Nb].
+    max_speed: float32 [T] largest speed during each frame (m/s).
+    wall_time_s: seconds simulating, compilation excluded.
+    compile_time_s: seconds compiling (0 when the program was cached).
+    n_substeps: substeps per frame.
+  """
+  scene: scene_lib.Scene
+  positions: np.ndarray
+  boundary_positions: np.ndarray
+  boundary_types: np.ndarray
+  max_speed: np.ndarray
+  wall_time_s: float
+  compile_time_s: float
+  n_substeps: int
+
+
+_rollout = jax.jit(solver.rollout, static_argnames=(
+    "spec", "n_frames", "n_substeps", "remat"))
+_batched_rollout = jax.jit(
+    jax.vmap(solver.rollout, in_axes=(0, 0, 0, None, None, None)),
+    static_argnums=(3, 4, 5))
+
+# Compiled chunk programs by (function, static args, argument shapes).
+_compiled: dict = {}
+
+
+def _compile(fn, *args):
+  key = (id(fn), args[3:], jax.tree.structure(args[:3]),
+         tuple((a.shape, a.dtype) for a in jax.tree.leaves(args[:3])))
+  if key in _compiled:
+    return _compiled[key], 0.0
+  start = time.perf_counter()
+  compiled = fn.lower(*args).compile()
+  _compiled[key] = compiled
+  return compiled, time.perf_counter() - start
+
+
+def chunking(num_frames: int, chunk_frames: int) -> tuple[int, int]:
+  """(number of chunks, frames per chunk) covering num_frames - 1 steps."""
+  steps = max(num_frames - 1, 1)
+  n_chunks = -(-steps // chunk_frames)
+  return n_chunks, -(-steps // n_chunks)
+
+
+def _check(scene_name, first_frame, finite, max_speed, bound):
+  """Raises SimulationError at the first frame that is non-finite or too fast."""
+  for k in range(len(finite)):
+    if not finite[k]:
+      raise SimulationError(scene_name, first_frame + k,
+                            "positions are not finite (numerical blow-up)")
+    if not max_speed[k] <= bound:
+      raise SimulationError(
+          scene_name, first_frame + k,
+          f"particle speed {max_speed[k]:.3f} m/s exceeds {bound:.3f} m/s, "
+          "the bound the substep count was chosen for (CFL violated)")
+
+
+def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
+                    progress: Callable[[int], None] | None = None
+                    ) -> list[SimulationResult]:
+  """Simulates scenes that share grid, frame count and substep count.
+
+  One scene runs as one program; several are padded to the same particle and
+  boundary-node counts and run as one vmapped program (the throughput path on
+  accelerators). Every chunk of frames is checked before the next one runs.
+
+  Args:
+    setups: from :func:`setup`, all with equal ``spec``, ``n_substeps`` and
+      ``scene.num_frames``, ``scene.frame_dt``.
+    chunk_frames: frames per compiled call (checking granularity).
+    progress: called with the number of frames finished after each chunk.
+
+  Raises:
+    SimulationError: at the first bad frame of any scene.
+  """
+  first = setups[0]
+  for s in setups[1:]:
+    if (s.spec, s.n_substeps, s.scene.num_frames, s.scene.frame_dt) != (
+        first.spec, first.n_substeps, first.scene.num_frames,
+        first.scene.frame_dt):
+      raise ValueError(
+          "simulate_setups: scenes in one batch need the same grid "
+          "(domain, dx), substeps per frame, num_frames and frame_dt; "
+          f"{s.scene.name!r} differs from {first.scene.name!r}")
+  batched = len(setups) > 1
+  if batched:
+    state, field = _pad_batch(setups)
+    params = jax.tree.map(lambda *a: jnp.stack(a), *[s.params for s in setups])
+  else:
+    state, params, field = first.state, first.params, first.field
+  n_chunks, frames = chunking(first.scene.num_frames, chunk_frames)
+  fn = _batched_rollout if batched else _rollout
+  static = (first.spec, frames, first.n_substeps)
+  compiled, compile_time = _compile(fn, state, params, field, *static)
+
+  positions = [np.asarray(state.x)[..., None, :, :]]
+  speeds = [np.zeros(state.x.shape[:-2] + (1,), np.float32)]
+  wall_time = 0.0
+  for chunk in range(n_chunks):
+    start = time.perf_counter()
+    state, x, vmax, finite = jax.block_until_ready(
+        compiled(state, params, field))
+    wall_time += time.perf_counter() - start
+    x, vmax, finite = np.asarray(x), np.asarray(vmax), np.asarray(finite)
+    for b, s in enumerate(setups):
+      pick = (lambda a: a[b]) if batched else (lambda a: a)
+      _check(s.scene.name, 1 + chunk * frames, pick(finite), pick(vmax),
+             s.max_speed)
+    positions.append(x)
+    speeds.append(vmax)
+    if progress is not None:
+      progress(min((chunk + 1) * frames, first.scene.num_frames - 1))
+
+  axis = 1 if batched else 0
+  positions = np.concatenate(positions, axis)
+  speeds = np.concatenate(speeds, -1)
+  results = []
+  for b, s in enumerate(setups):
+    pick = (lambda a: a[b]) if batched else (lambda a: a)
+    results.append(SimulationResult(
+        scene=s.scene,
+        positions=pick(positions)[:s.scene.num_frames, :s.n_particles],
+        boundary_positions=s.boundary_positions,
+        boundary_types=s.boundary_types,
+        max_speed=pick(speeds)[:s.scene.num_frames],
+        wall_time_s=wall_time / len(setups), compile_time_s=compile_time,
+        n_substeps=s.n_substeps))
+  return results
+
+
+def _pad_batch(setups: Sequence[Setup]):
+  """Stacks states (padded with zero-volume particles) and boundary fields
+  (padded with zero-weight entries) of several scenes."""
+  n = max(s.state.x.shape[0] for s in setups)
+  nb = max(s.field.index.shape[0] for s in setups)
+
+  def pad_state(st: solver.MPMState) -> solver.MPMState:
+    k = n - st.x.shape[0]
+    edge = lambda a: jnp.concatenate([a, jnp.repeat(a[:1], k, 0)])
+    return solver.MPMState(
+        x=edge(st.x), v=jnp.pad(st.v, ((0, k), (0, 0))), C=edge(st.C) * 0,
+        F=edge(st.F), volume_correction=jnp.pad(st.volume_correction, (0, k)),
+        volume=jnp.pad(st.volume, (0, k)))
+
+  def pad_field(f: boundary.BoundaryField) -> boundary.BoundaryField:
+    k = nb - f.index.shape[0]
+    # Padding entries repeat the first node with zero weights: a no-op.
+    edge = lambda a: jnp.concatenate([a, jnp.repeat(a[:1], k, 0)])
+    return boundary.BoundaryField(
+        index=edge(f.index), solid_normal=edge(f.solid_normal),
+        solid_weight=jnp.pad(f.solid_weight, (0, k)),
+        wall_normal=edge(f.wall_normal),
+        wall_weight=jnp.pad(f.wall_weight, ((0, k), (0, 0))))
+
+  stack = lambda items: jax.tree.map(lambda *a: jnp.stack(a), *items)
+  return (stack([pad_state(s.state) for s in setups]),
+          stack([pad_field(s.field) for s in setups]))
+
+
+def simulate(scene: scene_lib.Scene, *, chunk_frames: int = 50,
+             progress: Callable[[int], None] | None = None
+             ) -> SimulationResult:
+  """Simulates ``scene.num_frames`` frames of one scene (see
+  :func:`simulate_setups`)."""
+  return simulate_setups([setup(scene)], chunk_frames=chunk_frames,
+                         progress=progress)[0]
+
+
+def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
+                   chunk_frames: int = 50,
+                   progress: Callable[[int], None] | None = None
+                   ) -> list[SimulationResult]:
+  """Simulates several scenes in one vmapped program.
+
+  The substep count is the largest any scene needs, so every scene keeps its
+  CFL bound.
+  """
+  setups = [setup(s) for s in scenes]
+  n_substeps = max(s.n_substeps for s in setups)
+  setups = [dataclasses.replace(
+      s, n_substeps=n_substeps,
+      params=s.params.replace(dt=jnp.asarray(s.scene.frame_dt / n_substeps,
+                                             jnp.float32)))
+            for s in setups]
+  return simulate_setups(setups, chunk_frames=chunk_frames, progress=progress)

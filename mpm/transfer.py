@@ -1,0 +1,141 @@
+"""Particle-grid transfers of MLS-MPM with quadratic B-splines (APIC).
+
+Shapes: N particles, G grid nodes (flattened, node (i, j) -> i * ny + j),
+S = 9 stencil nodes per particle in 2D.
+
+References:
+  Hu et al. (2018), "A moving least squares material point method with
+  displacement discontinuity and two-way rigid body coupling".
+"""
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mpm import _pytree
+
+
+@dataclasses.dataclass(frozen=True)
+class GridSpec:
+  """A static background grid (hashable: it sets array shapes).
+
+  Attributes:
+    dx: node spacing [m].
+    shape: (nx, ny) nodes along x and y.
+    origin: world position [m] of node (0, 0).
+  """
+  dx: float
+  shape: tuple[int, int]
+  origin: tuple[float, float]
+
+  @property
+  def n_nodes(self) -> int:
+    return self.shape[0] * self.shape[1]
+
+  def node_positions(self) -> np.ndarray:
+    """World positions float64 [G, 2] of all nodes, flattened."""
+    i, j = np.meshgrid(np.arange(self.shape[0]), np.arange(self.shape[1]),
+                       indexing="ij")
+    return np.stack([self.origin[0] + i.ravel() * self.dx,
+                     self.origin[1] + j.ravel() * self.dx], -1)
+
+  @classmethod
+  def covering(cls, width: float, height: float, dx: float,
+               pad: int = 3) -> "GridSpec":
+    """A grid over [0, width] x [0, height] with ``pad`` cells beyond it.
+
+    The padding keeps every stencil of a particle inside (or half a cell
+    outside) the box on the grid.
+    """
+    nx = int(math.ceil(width / dx - 1e-9)) + 1 + 2 * pad
+    ny = int(math.ceil(height / dx - 1e-9)) + 1 + 2 * pad
+    return cls(float(dx), (nx, ny), (-pad * dx, -pad * dx))
+
+
+@_pytree.pytree_dataclass
+class Stencil:
+  """The 3 x 3 grid neighbourhood of each particle.
+
+  Attributes:
+    index: int32 [N, S] flat node indices.
+    weight: [N, S] quadratic B-spline weights (sum to 1 per particle).
+    offset: [N, S, 2] node position minus particle position [m].
+  """
+  index: jax.Array
+  weight: jax.Array
+  offset: jax.Array
+
+
+def stencil(x: jax.Array, spec: GridSpec) -> Stencil:
+  """Stencil of particles at ``x`` [N, 2] (m)."""
+  inv_dx = 1.0 / spec.dx
+  xg = (x - jnp.asarray([spec.origin], x.dtype)) * inv_dx
+  base = jnp.floor(xg - 0.5)
+  fx = xg - base                                         # in [0.5, 1.5)
+  w = jnp.stack([0.5 * (1.5 - fx)**2, 0.75 - (fx - 1.0)**2,
+                 0.5 * (fx - 0.5)**2], axis=1)           # [N, 3, 2]
+  weight = (w[:, :, None, 0] * w[:, None, :, 1]).reshape(-1, 9)
+  o = jnp.arange(3, dtype=x.dtype)
+  ox = (o[None, :] - fx[:, :1]) * spec.dx                # [N, 3]
+  oy = (o[None, :] - fx[:, 1:]) * spec.dx
+  offset = jnp.stack([jnp.broadcast_to(ox[:, :, None], (x.shape[0], 3, 3)),
+                      jnp.broadcast_to(oy[:, None, :], (x.shape[0], 3, 3))],
+                     -1).reshape(-1, 9, 2)
+  b = base.astype(jnp.int32)
+  oi = jnp.arange(3, dtype=jnp.int32)
+  index = ((b[:, :1, None] + oi[None, :, None]) * spec.shape[1] +
+           b[:, 1:, None] + oi[None, None, :]).reshape(-1, 9)
+  return Stencil(index, weight, offset)
+
+
+def p2g(st: Stencil, mass: jax.Array, momentum: jax.Array, affine: jax.Array,
+        n_nodes: int) -> jax.Array:
+  """Particle to grid: one packed scatter of momentum and mass.
+
+  Args:
+    st: particle stencils.
+    mass: [N] particle masses (kg; 0 for padding).
+    momentum: [N, 2] particle momenta m v.
+    affine: [N, 2, 2] APIC/MLS affine momentum (m C plus the stress term).
+    n_nodes: G.
+
+  Returns:
+    [G, 3] node momentum (x, y) and mass.
+  """
+  dpos = st.offset
+  mv = momentum[:, None, :] + jnp.stack(
+      [affine[:, None, 0, 0] * dpos[..., 0] + affine[:, None, 0, 1] * dpos[..., 1],
+       affine[:, None, 1, 0] * dpos[..., 0] + affine[:, None, 1, 1] * dpos[..., 1]],
+      -1)
+  values = jnp.concatenate([st.weight[..., None] * mv,
+                            (st.weight * mass[:, None])[..., None]], -1)
+  # Materialise the values: fused into the scatter they are recomputed per
+  # element, unvectorised (measured 1.5x slower on CPU).
+  values = jax.lax.optimization_barrier(values)
+  # Positions are clamped to the domain, whose stencils lie inside the padded
+  # grid, so the bounds check can be skipped (it costs a third of the scatter).
+  return jnp.zeros((n_nodes, 3), values.dtype).at[st.index.reshape(-1)].add(
+      values.reshape(-1, 3), mode="promise_in_bounds")
+
+
+def g2p(st: Stencil, grid_v: jax.Array, dx: float):
+  """Grid to particle: velocity and APIC affine field.
+
+  Args:
+    st: particle stencils.
+    grid_v: [G, 2] node velocities (m/s).
+    dx: node spacing (m).
+
+  Returns:
+    v: [N, 2] particle velocities; C: [N, 2, 2] velocity gradients (1/s).
+  """
+  gv = grid_v.at[st.index].get(mode="promise_in_bounds")  # [N, S, 2]
+  wv = st.weight[..., None] * gv
+  v = jnp.sum(wv, axis=1)
+  # An outer product summed over the stencil; written out, since tiny
+  # dot_generals are slow on CPU.
+  C = (4.0 / dx**2) * jnp.sum(wv[..., :, None] * st.offset[..., None, :], 1)
+  return v, C
