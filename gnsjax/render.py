@@ -1,0 +1,103 @@
+"""Pictures of trajectories: animations and frame grids (matplotlib).
+
+Each picture has one or more panels side by side (e.g. MPM and GNS), each a
+trajectory [T, N, 2] of sand drawn over the scene: the ramp filled below its
+surface, boundary particles coloured by type.
+"""
+
+import shutil
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+# pylint: disable=g-import-not-at-top,wrong-import-position
+import matplotlib.animation as animation
+import matplotlib.pyplot as plt
+import numpy as np
+
+import mpm
+
+_SAND = "#1f77b4"
+_TYPE_COLOURS = {mpm.RAMP_TYPE: "#222222", mpm.OBSTACLE_TYPE: "#8c2d04"}
+
+
+def _draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
+  w, h = scene.domain.width, scene.domain.height
+  x = np.linspace(0, w, 400)
+  ax.fill_between(x, 0, np.minimum(scene.ramp.height(x), h), color="#dddddd",
+                  zorder=0)
+  for t, colour in _TYPE_COLOURS.items():
+    pts = boundary_positions[boundary_types == t]
+    ax.scatter(pts[:, 0], pts[:, 1], s=1.5, c=colour, zorder=2, linewidths=0)
+  ax.set_xlim(0, w)
+  ax.set_ylim(0, h)
+  ax.set_aspect("equal")
+  ax.set_xticks([])
+  ax.set_yticks([])
+
+
+def _panels(n: int, width: float = 5.0):
+  fig, axes = plt.subplots(1, n, figsize=(width * n, width * 0.75),
+                           squeeze=False)
+  return fig, axes[0]
+
+
+def animate(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
+            boundary_positions: np.ndarray, boundary_types: np.ndarray,
+            out: str, *, stride: int = 4, fps: int = 25) -> str:
+  """Writes an animation of one or more trajectories side by side.
+
+  Args:
+    panels: (title, positions [T, N, 2]) pairs with equal T.
+    out: path; ``.mp4`` needs ffmpeg on PATH (else a ``.gif`` is written
+      beside it), ``.gif`` needs only Pillow.
+    stride: draw every ``stride``-th frame.
+
+  Returns:
+    The path written.
+  """
+  if out.endswith(".mp4") and shutil.which("ffmpeg") is None:
+    out = out[:-4] + ".gif"
+  fig, axes = _panels(len(panels))
+  dots = []
+  for ax, (title, x) in zip(axes, panels):
+    _draw_scene(ax, scene, boundary_positions, boundary_types)
+    ax.set_title(title)
+    dots.append(ax.scatter(x[0, :, 0], x[0, :, 1], s=2, c=_SAND, zorder=3,
+                           linewidths=0))
+  label = fig.suptitle("")
+  frames = range(0, len(panels[0][1]), stride)
+
+  def update(t):
+    for d, (_, x) in zip(dots, panels):
+      d.set_offsets(x[t])
+    label.set_text(f"t = {t * scene.frame_dt:.3f} s (frame {t})")
+    return dots + [label]
+
+  anim = animation.FuncAnimation(fig, update, frames=frames, blit=False)
+  writer = (animation.FFMpegWriter(fps=fps) if out.endswith(".mp4") else
+            animation.PillowWriter(fps=fps))
+  anim.save(out, writer=writer, dpi=80)
+  plt.close(fig)
+  return out
+
+
+def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
+               boundary_positions: np.ndarray, boundary_types: np.ndarray,
+               frames: Sequence[int], out: str) -> str:
+  """Writes a PNG grid: one row per chosen frame, one column per panel
+  (the layout of the paper's Figure 2)."""
+  fig, axes = plt.subplots(len(frames), len(panels),
+                           figsize=(4.5 * len(panels), 3.4 * len(frames)),
+                           squeeze=False)
+  for row, t in enumerate(frames):
+    for col, (title, x) in enumerate(panels):
+      ax = axes[row, col]
+      _draw_scene(ax, scene, boundary_positions, boundary_types)
+      ax.scatter(x[t, :, 0], x[t, :, 1], s=2, c=_SAND, zorder=3, linewidths=0)
+      ax.set_title(f"{title}, frame {t}")
+  fig.tight_layout()
+  fig.savefig(out, dpi=80)
+  plt.close(fig)
+  return out
