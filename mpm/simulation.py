@@ -192,19 +192,55 @@ def _check(scene_name, first_frame, finite, max_speed, bound):
           "the bound the substep count was chosen for (CFL violated)")
 
 
+def _bucket(n: int, multiple: int) -> int:
+  return -(-n // multiple) * multiple
+
+
+def pad_setup(s: Setup, n_particles: int, n_nodes: int) -> Setup:
+  """Pads a setup to ``n_particles`` particles and ``n_nodes`` boundary nodes.
+
+  Padding particles have zero volume (no mass, never move) and sit on the
+  first particle; padding nodes repeat the first node with zero weights (a
+  no-op). Padding to a few sizes keeps the number of compiled programs small.
+  """
+  k = n_particles - s.state.x.shape[0]
+  kb = n_nodes - s.field.index.shape[0]
+  if k < 0 or kb < 0:
+    raise ValueError(f"pad_setup: cannot pad {s.state.x.shape[0]} particles "
+                     f"and {s.field.index.shape[0]} nodes down to "
+                     f"{n_particles} and {n_nodes}")
+  edge = lambda a, n: jnp.concatenate([a, jnp.repeat(a[:1], n, 0)])
+  zeros = lambda a, n: jnp.concatenate([a, jnp.zeros((n,) + a.shape[1:],
+                                                     a.dtype)])
+  st, f = s.state, s.field
+  state = solver.MPMState(
+      x=edge(st.x, k), v=zeros(st.v, k), C=zeros(st.C, k), F=edge(st.F, k),
+      volume_correction=zeros(st.volume_correction, k),
+      volume=zeros(st.volume, k))
+  field = boundary.BoundaryField(
+      index=edge(f.index, kb), solid_normal=edge(f.solid_normal, kb),
+      solid_weight=zeros(f.solid_weight, kb),
+      wall_normal=edge(f.wall_normal, kb), wall_weight=zeros(f.wall_weight, kb))
+  return dataclasses.replace(s, state=state, field=field)
+
+
 def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
+                    particle_bucket: int = 64, node_bucket: int = 256,
                     progress: Callable[[int], None] | None = None
                     ) -> list[SimulationResult]:
   """Simulates scenes that share grid, frame count and substep count.
 
-  One scene runs as one program; several are padded to the same particle and
-  boundary-node counts and run as one vmapped program (the throughput path on
-  accelerators). Every chunk of frames is checked before the next one runs.
+  One scene runs as one program; several run as one vmapped program (the
+  throughput path on accelerators). Particle and boundary-node counts are
+  padded up to multiples of ``particle_bucket`` and ``node_bucket``, so that
+  scenes of similar size share a compiled program. Every chunk of frames is
+  checked before the next one runs.
 
   Args:
     setups: from :func:`setup`, all with equal ``spec``, ``n_substeps`` and
       ``scene.num_frames``, ``scene.frame_dt``.
     chunk_frames: frames per compiled call (checking granularity).
+    particle_bucket, node_bucket: padding multiples (1: no padding).
     progress: called with the number of frames finished after each chunk.
 
   Raises:
@@ -219,16 +255,22 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
           "simulate_setups: scenes in one batch need the same grid "
           "(domain, dx), substeps per frame, num_frames and frame_dt; "
           f"{s.scene.name!r} differs from {first.scene.name!r}")
+  n = _bucket(max(s.state.x.shape[0] for s in setups), particle_bucket)
+  nb = _bucket(max(s.field.index.shape[0] for s in setups), node_bucket)
+  padded = [pad_setup(s, n, nb) for s in setups]
   batched = len(setups) > 1
   if batched:
-    state, field = _pad_batch(setups)
-    params = jax.tree.map(lambda *a: jnp.stack(a), *[s.params for s in setups])
+    stack = lambda *a: jnp.stack(a)
+    state = jax.tree.map(stack, *[s.state for s in padded])
+    params = jax.tree.map(stack, *[s.params for s in padded])
+    field = jax.tree.map(stack, *[s.field for s in padded])
   else:
-    state, params, field = first.state, first.params, first.field
+    state, params, field = padded[0].state, padded[0].params, padded[0].field
   n_chunks, frames = chunking(first.scene.num_frames, chunk_frames)
   fn = _batched_rollout if batched else _rollout
   static = (first.spec, frames, first.n_substeps)
   compiled, compile_time = _compile(fn, state, params, field, *static)
+  pick = lambda a, b: a[b] if batched else a
 
   positions = [np.asarray(state.x)[..., None, :, :]]
   speeds = [np.zeros(state.x.shape[:-2] + (1,), np.float32)]
@@ -240,77 +282,39 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     wall_time += time.perf_counter() - start
     x, vmax, finite = np.asarray(x), np.asarray(vmax), np.asarray(finite)
     for b, s in enumerate(setups):
-      pick = (lambda a: a[b]) if batched else (lambda a: a)
-      _check(s.scene.name, 1 + chunk * frames, pick(finite), pick(vmax),
+      _check(s.scene.name, 1 + chunk * frames, pick(finite, b), pick(vmax, b),
              s.max_speed)
     positions.append(x)
     speeds.append(vmax)
     if progress is not None:
       progress(min((chunk + 1) * frames, first.scene.num_frames - 1))
 
-  axis = 1 if batched else 0
-  positions = np.concatenate(positions, axis)
+  positions = np.concatenate(positions, 1 if batched else 0)
   speeds = np.concatenate(speeds, -1)
-  results = []
-  for b, s in enumerate(setups):
-    pick = (lambda a: a[b]) if batched else (lambda a: a)
-    results.append(SimulationResult(
-        scene=s.scene,
-        positions=pick(positions)[:s.scene.num_frames, :s.n_particles],
-        boundary_positions=s.boundary_positions,
-        boundary_types=s.boundary_types,
-        max_speed=pick(speeds)[:s.scene.num_frames],
-        wall_time_s=wall_time / len(setups), compile_time_s=compile_time,
-        n_substeps=s.n_substeps))
-  return results
+  return [SimulationResult(
+      scene=s.scene,
+      positions=pick(positions, b)[:s.scene.num_frames, :s.state.x.shape[0]],
+      boundary_positions=s.boundary_positions,
+      boundary_types=s.boundary_types,
+      max_speed=pick(speeds, b)[:s.scene.num_frames],
+      wall_time_s=wall_time / len(setups), compile_time_s=compile_time,
+      n_substeps=s.n_substeps) for b, s in enumerate(setups)]
 
 
-def _pad_batch(setups: Sequence[Setup]):
-  """Stacks states (padded with zero-volume particles) and boundary fields
-  (padded with zero-weight entries) of several scenes."""
-  n = max(s.state.x.shape[0] for s in setups)
-  nb = max(s.field.index.shape[0] for s in setups)
+def simulate(scene: scene_lib.Scene, **kwargs) -> SimulationResult:
+  """Simulates ``scene.num_frames`` frames of one scene.
 
-  def pad_state(st: solver.MPMState) -> solver.MPMState:
-    k = n - st.x.shape[0]
-    edge = lambda a: jnp.concatenate([a, jnp.repeat(a[:1], k, 0)])
-    return solver.MPMState(
-        x=edge(st.x), v=jnp.pad(st.v, ((0, k), (0, 0))), C=edge(st.C) * 0,
-        F=edge(st.F), volume_correction=jnp.pad(st.volume_correction, (0, k)),
-        volume=jnp.pad(st.volume, (0, k)))
-
-  def pad_field(f: boundary.BoundaryField) -> boundary.BoundaryField:
-    k = nb - f.index.shape[0]
-    # Padding entries repeat the first node with zero weights: a no-op.
-    edge = lambda a: jnp.concatenate([a, jnp.repeat(a[:1], k, 0)])
-    return boundary.BoundaryField(
-        index=edge(f.index), solid_normal=edge(f.solid_normal),
-        solid_weight=jnp.pad(f.solid_weight, (0, k)),
-        wall_normal=edge(f.wall_normal),
-        wall_weight=jnp.pad(f.wall_weight, ((0, k), (0, 0))))
-
-  stack = lambda items: jax.tree.map(lambda *a: jnp.stack(a), *items)
-  return (stack([pad_state(s.state) for s in setups]),
-          stack([pad_field(s.field) for s in setups]))
+  Keyword arguments are those of :func:`simulate_setups`.
+  """
+  return simulate_setups([setup(scene)], **kwargs)[0]
 
 
-def simulate(scene: scene_lib.Scene, *, chunk_frames: int = 50,
-             progress: Callable[[int], None] | None = None
-             ) -> SimulationResult:
-  """Simulates ``scene.num_frames`` frames of one scene (see
-  :func:`simulate_setups`)."""
-  return simulate_setups([setup(scene)], chunk_frames=chunk_frames,
-                         progress=progress)[0]
-
-
-def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
-                   chunk_frames: int = 50,
-                   progress: Callable[[int], None] | None = None
-                   ) -> list[SimulationResult]:
+def simulate_batch(scenes: Sequence[scene_lib.Scene],
+                   **kwargs) -> list[SimulationResult]:
   """Simulates several scenes in one vmapped program.
 
   The substep count is the largest any scene needs, so every scene keeps its
-  CFL bound.
+  CFL bound. Keyword arguments are those of :func:`simulate_setups`.
   """
   setups = [setup(s) for s in scenes]
   n_substeps = max(s.n_substeps for s in setups)
@@ -319,4 +323,4 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
       params=s.params.replace(dt=jnp.asarray(s.scene.frame_dt / n_substeps,
                                              jnp.float32)))
             for s in setups]
-  return simulate_setups(setups, chunk_frames=chunk_frames, progress=progress)
+  return simulate_setups(setups, **kwargs)
