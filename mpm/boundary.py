@@ -31,7 +31,8 @@ class BoundaryField:
   """Boundary data of the B nodes that need it.
 
   Attributes:
-    index: int32 [B] flat node indices (unique).
+    index: int32 [B] flat node indices; unique, except padding entries, which
+      all point at node 0, a node no particle reaches.
     solid_normal: [B, 2] outward unit normal of the nearest solid.
     solid_weight: [B] how fully the solid condition acts, in [0, 1].
     wall_normal: [B, 2] inward normals (+-1, 0) and (0, +-1) of the box walls.
@@ -66,7 +67,10 @@ def select_nodes(spec: transfer.GridSpec, width: float, height: float,
 
   Host-side (not jittable): nodes whose condition weight is non-zero, within
   ``margin_cells`` extra cells so that small moves of an obstacle stay
-  covered, and not buried deeper than sand can reach.
+  covered, and not buried deeper than sand can reach. The first two columns
+  of nodes are never listed: no particle stencil reaches them (positions are
+  clamped to the domain), so node 0 can serve as the target of padding
+  entries.
   """
   p = jnp.asarray(spec.node_positions(), jnp.float32)
   phi = np.asarray(geometry._solid_sdf(ramp, obstacles, p)) / spec.dx  # pylint: disable=protected-access
@@ -75,7 +79,8 @@ def select_nodes(spec: transfer.GridSpec, width: float, height: float,
           (dist_x / spec.dx < 0.5 + margin_cells) |
           (dist_y / spec.dx < 0.5 + margin_cells))
   reachable = phi > -_DEPTH_CELLS - margin_cells
-  return np.flatnonzero(near & reachable).astype(np.int32)
+  touched = np.arange(spec.n_nodes) >= 2 * spec.shape[1]
+  return np.flatnonzero(near & reachable & touched).astype(np.int32)
 
 
 def make_field(spec: transfer.GridSpec, index: jax.Array, width: float,
@@ -133,4 +138,4 @@ def apply(field: BoundaryField, grid_v: jax.Array, boundary_friction,
               field.wall_weight[:, 0], wall_friction)
   v = coulomb(v, jnp.concatenate([zeros, field.wall_normal[:, 1:]], -1),
               field.wall_weight[:, 1], wall_friction)
-  return grid_v.at[field.index].set(v, unique_indices=True)
+  return grid_v.at[field.index].set(v)

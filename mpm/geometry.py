@@ -197,14 +197,15 @@ def outline_size(obstacle: scene_lib.Obstacle, spacing: float) -> int:
 
 
 def obstacle_outline(ramp: RampParams, obstacle: ObstacleParams,
-                     n_points: int) -> jax.Array:
-  """World positions [n_points, 2] evenly spaced along the exposed outline.
+                     s: jax.Array) -> jax.Array:
+  """World positions [P, 2] along the exposed outline at fractions s [P].
 
-  The exposed outline runs from one end of the base, over the top, to the
-  other; it is a differentiable function of the obstacle's x and size.
+  The exposed outline runs from one end of the base (s = 0), over the top, to
+  the other (s = 1); it is a differentiable function of the obstacle's x and
+  size. ``jnp.linspace(0, 1, outline_size(...))`` samples it at the particle
+  spacing.
   """
   base, tangent, normal = obstacle_frame(ramp, obstacle)
-  s = jnp.linspace(0.0, 1.0, n_points)
   if obstacle.shape == "semicircle":
     angle = jnp.pi * s
     r = obstacle.size[0]
@@ -226,7 +227,15 @@ def obstacle_outline(ramp: RampParams, obstacle: ObstacleParams,
           local[:, 1:] * normal[None])
 
 
-_obstacle_outline = jax.jit(obstacle_outline, static_argnums=2)
+_obstacle_outline = jax.jit(obstacle_outline)
+
+
+def _sample_outline(ramp, obstacle, n_points: int) -> np.ndarray:
+  # Padded to a multiple of 64 points: one compiled program per bucket.
+  s = np.ones(-(-n_points // 64) * 64, np.float32)
+  s[:n_points] = np.linspace(0.0, 1.0, n_points)
+  return np.asarray(_obstacle_outline(ramp, obstacle, jnp.asarray(s)))[
+      :n_points]
 
 
 def ramp_surface(ramp: scene_lib.Ramp, domain: scene_lib.Domain,
@@ -259,9 +268,8 @@ def boundary_particles(scene: scene_lib.Scene) -> tuple[np.ndarray, np.ndarray]:
     covered = np.min(np.stack([np.asarray(_obstacle_sdf(ramp, o, surface))
                                for o in obstacles]), axis=0) < 0
     surface = surface[~covered]
-  parts = [surface] + [
-      np.asarray(_obstacle_outline(ramp, o, outline_size(s, spacing)))
-      for o, s in zip(obstacles, scene.obstacles)]
+  parts = [surface] + [_sample_outline(ramp, o, outline_size(s, spacing))
+                       for o, s in zip(obstacles, scene.obstacles)]
   types = [np.full(len(surface), RAMP_TYPE, np.int32)] + [
       np.full(len(p), OBSTACLE_TYPE, np.int32) for p in parts[1:]]
   return (np.concatenate(parts).astype(np.float32), np.concatenate(types))

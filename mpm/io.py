@@ -20,8 +20,9 @@ load this one.
 """
 
 import dataclasses
+import json
 import os
-from typing import Iterator, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import h5py
 import numpy as np
@@ -111,27 +112,51 @@ def write_trajectories(path: str, trajectories: Sequence[Trajectory], *,
     stats: normalisation statistics (see ``finite_difference_stats``);
       default: computed from these trajectories.
   """
-  if not trajectories:
-    raise ValueError("write_trajectories: no trajectories given")
-  first = trajectories[0].scene
-  for t in trajectories:
-    _check_trajectory(t)
-    if (t.scene.domain, t.scene.frame_dt) != (first.domain, first.frame_dt):
-      raise ValueError("write_trajectories: all trajectories of a file need "
-                       "the same domain and frame_dt")
   if stats is None:
     stats = finite_difference_stats([t.positions for t in trajectories])
+  write_split(path, trajectories, stats=stats,
+              connectivity_radius=connectivity_radius)
+
+
+def write_split(path: str, trajectories: Iterable[Trajectory], *, stats: dict,
+                connectivity_radius: float = DEFAULT_CONNECTIVITY_RADIUS
+                ) -> list[float]:
+  """Streams trajectories into ``path`` (atomically: all or nothing).
+
+  Returns:
+    Each trajectory's ``wall_time_s``, in order.
+  """
   tmp = f"{path}.tmp-{os.getpid()}"
+  wall_times = []
   try:
     with h5py.File(tmp, "w") as f:
-      write_header(f, first, len(trajectories[0].positions), stats,
-                   connectivity_radius)
+      first = None
       for i, t in enumerate(trajectories):
+        _check_trajectory(t)
+        if first is None:
+          first = t.scene
+          write_header(f, first, len(t.positions), stats, connectivity_radius)
+        elif (t.scene.domain, t.scene.frame_dt) != (first.domain,
+                                                     first.frame_dt):
+          raise ValueError("write_split: all trajectories of a file need the "
+                           "same domain and frame_dt")
         write_group(f, f"{i:05d}", t)
+        wall_times.append(t.wall_time_s)
+      if first is None:
+        raise ValueError("write_split: no trajectories given")
     os.replace(tmp, path)
   finally:
     if os.path.exists(tmp):
       os.remove(tmp)
+  return wall_times
+
+
+def write_json(path: str, obj) -> None:
+  """Writes ``obj`` as JSON atomically."""
+  tmp = f"{path}.tmp-{os.getpid()}"
+  with open(tmp, "w") as f:
+    json.dump(obj, f, indent=2)
+  os.replace(tmp, path)
 
 
 def write_header(f: h5py.File, scene: scene_lib.Scene, sequence_length: int,

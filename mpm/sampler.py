@@ -40,6 +40,7 @@ def sample_scene(seed: int, *, num_particles: int | None = None,
                  num_obstacles: int | None = None,
                  shapes: Sequence[str] = TRAIN_SHAPES,
                  obstacle_x: Sequence[float] | None = None,
+                 spacing: float = scene_lib.Granular.spacing,
                  name: str | None = None, **overrides) -> scene_lib.Scene:
   """Draws a paper scene; every unset choice comes from Table 1.
 
@@ -50,6 +51,7 @@ def sample_scene(seed: int, *, num_particles: int | None = None,
     shapes: shapes to draw obstacles from (add "triangle" for test scenes).
     obstacle_x: fixed base positions (one per obstacle), else uniform in
       [0.5, 1.3] m.
+    spacing: particle spacing (m); the grid spacing is twice that.
     name: the scene's name (default "seed_<seed>").
     **overrides: other top-level scene keys (e.g. num_frames=100).
 
@@ -67,7 +69,7 @@ def sample_scene(seed: int, *, num_particles: int | None = None,
                      f"{num_obstacles} obstacles")
   base = {"name": name or f"seed_{seed}",
           "granular": {"box": list(scene_lib.Granular.box),
-                       "spacing": scene_lib.Granular.spacing,
+                       "spacing": spacing,
                        "num_particles": num_particles}, **overrides}
   last_error = None
   for _ in range(_MAX_TRIES):

@@ -41,12 +41,14 @@ def wave_speed(material: scene_lib.Material) -> float:
   return math.sqrt((lam + 2 * mu) / material.density)
 
 
-def speed_bound(scene: scene_lib.Scene, x0: np.ndarray) -> float:
-  """Largest speed [m/s] the sand can reach: free fall from its top to the
-  lowest point of the ramp (energy conservation; friction only lowers it)."""
+def speed_bound(scene: scene_lib.Scene) -> float:
+  """Largest speed [m/s] sand can reach in the scene: free fall from the top
+  of the domain to the lowest point of the ramp (energy conservation;
+  friction only lowers it). It depends on the domain and ramp alone, so
+  scenes that share them share a substep count (and a compiled program)."""
   lowest = float(np.min(scene.ramp.height(np.linspace(0, scene.domain.width,
                                                       2001))))
-  drop = float(np.max(x0[:, 1])) - max(lowest, 0.0)
+  drop = scene.domain.height - max(lowest, 0.0)
   return math.sqrt(2 * GRAVITY * max(drop, scene.dx))
 
 
@@ -74,6 +76,7 @@ class Setup:
     field: boundary conditions on grid nodes.
     boundary_positions: float32 [Nb, 2] static boundary particles.
     boundary_types: int32 [Nb].
+    n_particles: real particles; the state holds padding beyond them.
   """
   scene: scene_lib.Scene
   spec: transfer.GridSpec
@@ -84,10 +87,7 @@ class Setup:
   field: boundary.BoundaryField
   boundary_positions: np.ndarray
   boundary_types: np.ndarray
-
-  @property
-  def n_particles(self) -> int:
-    return int(np.sum(np.asarray(self.state.volume) > 0))
+  n_particles: int
 
 
 def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
@@ -102,8 +102,19 @@ def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
       dt=f32(dt), domain=f32([scene.domain.width, scene.domain.height]))
 
 
-def setup(scene: scene_lib.Scene, x0: np.ndarray | None = None) -> Setup:
+def _bucket(n: int, multiple: int) -> int:
+  return -(-n // multiple) * multiple
+
+
+def setup(scene: scene_lib.Scene, x0: np.ndarray | None = None, *,
+          particle_bucket: int = 64, node_bucket: int = 256) -> Setup:
   """Builds the initial state and discretisation of ``scene``.
+
+  Particle and boundary-node counts are padded up to multiples of
+  ``particle_bucket`` and ``node_bucket`` (1: no padding), so that scenes of
+  similar size share compiled programs. Padding particles have zero volume
+  (no mass; they never move); padding nodes point at node 0, which no
+  particle reaches.
 
   Args:
     x0: optional initial positions [N, 2]; default the scene's lattice.
@@ -111,22 +122,27 @@ def setup(scene: scene_lib.Scene, x0: np.ndarray | None = None) -> Setup:
   if x0 is None:
     x0 = geometry.granular_particles(scene)
   x0 = np.asarray(x0, np.float32)
+  n = len(x0)
   spec = transfer.GridSpec.covering(scene.domain.width, scene.domain.height,
                                     scene.dx)
-  vmax = speed_bound(scene, x0)
+  vmax = speed_bound(scene)
   n_substeps = substeps_per_frame(scene, vmax)
   ramp = geometry.ramp_params(scene.ramp)
   obstacles = tuple(geometry.obstacle_params(o) for o in scene.obstacles)
   index = boundary.select_nodes(spec, scene.domain.width, scene.domain.height,
                                 ramp, obstacles)
+  index = np.pad(index, (0, _bucket(len(index), node_bucket) - len(index)))
   field = _make_field(spec, jnp.asarray(index), scene.domain.width,
-                              scene.domain.height, ramp, obstacles)
-  volume = np.full(len(x0), scene.granular.spacing**2, np.float32)
+                      scene.domain.height, ramp, obstacles)
+  padded = _bucket(n, particle_bucket)
+  volume = np.zeros(padded, np.float32)
+  volume[:n] = scene.granular.spacing**2
+  x0 = np.concatenate([x0, np.repeat(x0[:1], padded - n, 0)])
   state = solver.init_state(jnp.asarray(x0), jnp.asarray(volume))
   bpos, btype = geometry.boundary_particles(scene)
   return Setup(scene, spec, n_substeps, vmax, state,
                sim_params(scene, scene.frame_dt / n_substeps), field, bpos,
-               btype)
+               btype, n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,16 +208,12 @@ def _check(scene_name, first_frame, finite, max_speed, bound):
           "the bound the substep count was chosen for (CFL violated)")
 
 
-def _bucket(n: int, multiple: int) -> int:
-  return -(-n // multiple) * multiple
-
-
 def pad_setup(s: Setup, n_particles: int, n_nodes: int) -> Setup:
   """Pads a setup to ``n_particles`` particles and ``n_nodes`` boundary nodes.
 
   Padding particles have zero volume (no mass, never move) and sit on the
-  first particle; padding nodes repeat the first node with zero weights (a
-  no-op). Padding to a few sizes keeps the number of compiled programs small.
+  first particle; padding nodes point at node 0, which no particle reaches,
+  with zero weights.
   """
   k = n_particles - s.state.x.shape[0]
   kb = n_nodes - s.field.index.shape[0]
@@ -218,29 +230,25 @@ def pad_setup(s: Setup, n_particles: int, n_nodes: int) -> Setup:
       volume_correction=zeros(st.volume_correction, k),
       volume=zeros(st.volume, k))
   field = boundary.BoundaryField(
-      index=edge(f.index, kb), solid_normal=edge(f.solid_normal, kb),
+      index=zeros(f.index, kb), solid_normal=edge(f.solid_normal, kb),
       solid_weight=zeros(f.solid_weight, kb),
       wall_normal=edge(f.wall_normal, kb), wall_weight=zeros(f.wall_weight, kb))
   return dataclasses.replace(s, state=state, field=field)
 
 
 def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
-                    particle_bucket: int = 64, node_bucket: int = 256,
                     progress: Callable[[int], None] | None = None
                     ) -> list[SimulationResult]:
   """Simulates scenes that share grid, frame count and substep count.
 
-  One scene runs as one program; several run as one vmapped program (the
-  throughput path on accelerators). Particle and boundary-node counts are
-  padded up to multiples of ``particle_bucket`` and ``node_bucket``, so that
-  scenes of similar size share a compiled program. Every chunk of frames is
-  checked before the next one runs.
+  One scene runs as one program; several are padded to one particle and
+  boundary-node count and run as one vmapped program (the throughput path on
+  accelerators). Every chunk of frames is checked before the next one runs.
 
   Args:
     setups: from :func:`setup`, all with equal ``spec``, ``n_substeps`` and
       ``scene.num_frames``, ``scene.frame_dt``.
     chunk_frames: frames per compiled call (checking granularity).
-    particle_bucket, node_bucket: padding multiples (1: no padding).
     progress: called with the number of frames finished after each chunk.
 
   Raises:
@@ -255,8 +263,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
           "simulate_setups: scenes in one batch need the same grid "
           "(domain, dx), substeps per frame, num_frames and frame_dt; "
           f"{s.scene.name!r} differs from {first.scene.name!r}")
-  n = _bucket(max(s.state.x.shape[0] for s in setups), particle_bucket)
-  nb = _bucket(max(s.field.index.shape[0] for s in setups), node_bucket)
+  n = max(s.state.x.shape[0] for s in setups)
+  nb = max(s.field.index.shape[0] for s in setups)
   padded = [pad_setup(s, n, nb) for s in setups]
   batched = len(setups) > 1
   if batched:
@@ -293,7 +301,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   speeds = np.concatenate(speeds, -1)
   return [SimulationResult(
       scene=s.scene,
-      positions=pick(positions, b)[:s.scene.num_frames, :s.state.x.shape[0]],
+      positions=pick(positions, b)[:s.scene.num_frames, :s.n_particles],
       boundary_positions=s.boundary_positions,
       boundary_types=s.boundary_types,
       max_speed=pick(speeds, b)[:s.scene.num_frames],

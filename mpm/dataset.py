@@ -1,0 +1,300 @@
+"""The paper's dataset: scene plans, resumable generation, verification.
+
+A dataset directory holds ``train.h5``, ``test.h5`` (``mpm.io`` format) and
+``metadata.json`` (the keys of DeepMind's and geoelements' GNS datasets plus
+our own). Generation writes each finished trajectory atomically to
+``parts/<split>_<index>.h5``; once all exist they are assembled into the split
+files (normalisation statistics from the training split only) and
+``metadata.json`` is written last, marking the dataset complete. A run killed
+at any moment is resumed by running it again: finished parts are kept, half-
+written temporary files are discarded, nothing is duplicated.
+
+The test split is planned so that the paper's breakdowns can be computed:
+obstacle count (0, 1, 2), particle count (700, 1000, 1500 at the paper's
+spacing), obstacle shape (semicircle, rectangle, and the triangle, which
+training never sees) and rectangle position (x = 0.6, 1.0, 1.3). Each test
+trajectory records its ``group`` in the scene name.
+"""
+
+import concurrent.futures
+import dataclasses
+import glob
+import json
+import multiprocessing
+import os
+import shutil
+from typing import Callable, Sequence
+
+import jax
+import numpy as np
+
+from mpm import io as mpm_io
+from mpm import sampler
+from mpm import scene as scene_lib
+from mpm import simulation
+
+PAPER_SPACING = 0.005
+TEST_PARTICLES = (700, 1000, 1500)
+# The test plan cycles through these groups: (tag, shapes, obstacle count,
+# fixed x of the obstacle or None).
+TEST_GROUPS = (
+    ("none", (), 0, None),
+    ("semicircle", ("semicircle",), 1, None),
+    ("rectangle_x0.6", ("rectangle",), 1, 0.6),
+    ("rectangle_x1.0", ("rectangle",), 1, 1.0),
+    ("rectangle_x1.3", ("rectangle",), 1, 1.3),
+    ("triangle", ("triangle",), 1, None),
+    ("two", ("semicircle", "rectangle", "triangle"), 2, None),
+)
+_TEST_SEED_OFFSET = 1_000_000
+
+
+@dataclasses.dataclass(frozen=True)
+class DatasetSpec:
+  """What to generate (plain values: a config's ``dataset`` block).
+
+  Attributes:
+    num_train, num_test: trajectories per split.
+    num_frames: frames per trajectory (frame 0 is the initial state).
+    seed: base seed; trajectory i of a split uses a seed derived from it.
+    spacing: particle spacing (m); the grid spacing is twice that, and the
+      paper's particle counts scale with (0.005 / spacing)^2.
+    connectivity_radius: written to the metadata for the learned simulator.
+  """
+  num_train: int = 1000
+  num_test: int = 100
+  num_frames: int = 600
+  seed: int = 0
+  spacing: float = PAPER_SPACING
+  connectivity_radius: float = 0.015
+
+  def particles(self, n: int) -> int:
+    """A paper particle count at this spacing."""
+    return max(1, int(round(n * (PAPER_SPACING / self.spacing)**2)))
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannedScene:
+  split: str
+  index: int
+  seed: int
+  scene: scene_lib.Scene
+
+  @property
+  def part_name(self) -> str:
+    return f"{self.split}_{self.index:05d}.h5"
+
+
+def _scene(spec: DatasetSpec, seed: int, name: str, **kwargs):
+  return sampler.sample_scene(seed, name=name, num_frames=spec.num_frames,
+                              spacing=spec.spacing, **kwargs)
+
+
+def plan(spec: DatasetSpec) -> list[PlannedScene]:
+  """Every scene of the dataset, deterministic from ``spec``."""
+  lo, hi = (spec.particles(n) for n in sampler.PARTICLE_RANGE)
+  scenes = []
+  for i in range(spec.num_train):
+    seed = spec.seed + i
+    n = int(np.random.default_rng([seed, 1]).integers(lo, hi + 1))
+    scenes.append(PlannedScene("train", i, seed, _scene(
+        spec, seed, f"train/{i:05d}", num_particles=n)))
+  for i in range(spec.num_test):
+    seed = spec.seed + _TEST_SEED_OFFSET + i
+    tag, shapes, count, x = TEST_GROUPS[i % len(TEST_GROUPS)]
+    n = spec.particles(TEST_PARTICLES[i % len(TEST_PARTICLES)])
+    scenes.append(PlannedScene("test", i, seed, _scene(
+        spec, seed, f"test/{i:05d}/{tag}", num_particles=n,
+        num_obstacles=count, shapes=shapes or sampler.TRAIN_SHAPES,
+        obstacle_x=None if x is None else [x])))
+  return scenes
+
+
+def group_of(scene_name: str) -> str:
+  """The test group tag of a planned scene's name ('' for training)."""
+  parts = scene_name.split("/")
+  return parts[2] if len(parts) > 2 else ""
+
+
+# ------------------------------------------------------------- generation ---
+
+
+def _simulate_part(item: PlannedScene, parts_dir: str) -> float:
+  """Simulates one planned scene and writes its part file atomically."""
+  result = simulation.simulate(item.scene)
+  trajectory = mpm_io.Trajectory.from_result(result, item.seed)
+  mpm_io.write_trajectories(os.path.join(parts_dir, item.part_name),
+                            [trajectory])
+  return result.wall_time_s
+
+
+def _part_ok(path: str) -> bool:
+  try:
+    with mpm_io.open_file(path) as f:
+      return len(f.keys()) == 1
+  except mpm_io.FormatError:
+    return False
+
+
+def _init_worker(cache_dir: str | None) -> None:
+  if cache_dir:
+    jax.config.update("jax_compilation_cache_dir", cache_dir)
+
+
+def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
+             progress: Callable[[int, int, float], None] | None = None,
+             compilation_cache: str | None = None) -> dict:
+  """Generates (or finishes) the dataset in ``out_dir``.
+
+  Args:
+    workers: processes simulating in parallel (1: in this process).
+    compilation_cache: persistent compilation cache for worker processes.
+    progress: called as progress(done, total, wall_time_s) after each
+      trajectory (also for parts found finished from an earlier run).
+
+  Returns:
+    The metadata written.
+  """
+  meta_path = os.path.join(out_dir, "metadata.json")
+  if os.path.exists(meta_path):
+    with open(meta_path) as f:
+      return json.load(f)
+  parts_dir = os.path.join(out_dir, "parts")
+  os.makedirs(parts_dir, exist_ok=True)
+  for stale in glob.glob(os.path.join(parts_dir, "*.tmp-*")):
+    os.remove(stale)  # half-written by a killed run
+  items = plan(spec)
+  todo = [it for it in items
+          if not _part_ok(os.path.join(parts_dir, it.part_name))]
+  done = len(items) - len(todo)
+  if progress is not None:
+    progress(done, len(items), 0.0)
+  if workers <= 1 or len(todo) <= 1:
+    for it in todo:
+      wall = _simulate_part(it, parts_dir)
+      done += 1
+      if progress is not None:
+        progress(done, len(items), wall)
+  else:
+    context = multiprocessing.get_context("spawn")  # JAX is not fork-safe
+    with concurrent.futures.ProcessPoolExecutor(
+        workers, mp_context=context, initializer=_init_worker,
+        initargs=(compilation_cache,)) as pool:
+      futures = [pool.submit(_simulate_part, it, parts_dir) for it in todo]
+      for future in concurrent.futures.as_completed(futures):
+        wall = future.result()
+        done += 1
+        if progress is not None:
+          progress(done, len(items), wall)
+  return assemble(spec, out_dir, items)
+
+
+def _read_part(parts_dir: str, item: PlannedScene) -> mpm_io.Trajectory:
+  (trajectory,) = mpm_io.read_trajectories(
+      os.path.join(parts_dir, item.part_name))
+  return trajectory
+
+
+def assemble(spec: DatasetSpec, out_dir: str,
+             items: Sequence[PlannedScene]) -> dict:
+  """Writes the split files and metadata from finished parts; removes them."""
+  parts_dir = os.path.join(out_dir, "parts")
+  train = [it for it in items if it.split == "train"]
+  stats = mpm_io.finite_difference_stats(
+      _read_part(parts_dir, it).positions for it in train)
+  wall_time = {}
+  for split in ("train", "test"):
+    members = [it for it in items if it.split == split]
+    wall_time[split] = sum(mpm_io.write_split(
+        os.path.join(out_dir, f"{split}.h5"),
+        (_read_part(parts_dir, it) for it in members), stats=stats,
+        connectivity_radius=spec.connectivity_radius))
+  first = items[0].scene
+  metadata = {
+      # DeepMind / geoelements GNS keys
+      "bounds": [[0.0, first.domain.width], [0.0, first.domain.height]],
+      "sequence_length": spec.num_frames,
+      "default_connectivity_radius": spec.connectivity_radius,
+      "dim": 2,
+      "dt": first.frame_dt,
+      **{k: [float(v) for v in stats[k]]
+         for k in ("vel_mean", "vel_std", "acc_mean", "acc_std")},
+      # ours
+      "format_version": mpm_io.FORMAT_VERSION,
+      "num_train": spec.num_train,
+      "num_test": spec.num_test,
+      "spec": dataclasses.asdict(spec),
+      "wall_time_s": wall_time,
+  }
+  mpm_io.write_json(os.path.join(out_dir, "metadata.json"), metadata)
+  shutil.rmtree(parts_dir)
+  return metadata
+
+
+# ----------------------------------------------------------- verification ---
+
+
+def load_spec(out_dir: str) -> DatasetSpec:
+  """The spec a finished dataset was generated from (its metadata)."""
+  path = os.path.join(out_dir, "metadata.json")
+  if not os.path.exists(path):
+    raise mpm_io.FormatError(f"{path}: missing; the dataset is incomplete "
+                             "(rerun the generation to finish it)")
+  try:
+    with open(path) as f:
+      return DatasetSpec(**json.load(f)["spec"])
+  except (json.JSONDecodeError, KeyError, TypeError) as e:
+    raise mpm_io.FormatError(f"{path}: not a dataset metadata file ({e})"
+                             ) from e
+
+
+def verify(out_dir: str, *, reproduce: int = 2,
+           reproduce_frames: int = 10) -> list[str]:
+  """Checks a finished dataset; returns the problems found (empty: sound).
+
+  Every trajectory: readable, the planned shape [num_frames, N, 2], finite,
+  its scene the one its seed plans. For ``reproduce`` trajectories per split
+  the first ``reproduce_frames`` frames are simulated again and compared.
+  """
+  try:
+    spec = load_spec(out_dir)
+  except mpm_io.FormatError as e:
+    return [str(e)]
+  items = {(it.split, it.index): it for it in plan(spec)}
+  problems = []
+  for split, count in (("train", spec.num_train), ("test", spec.num_test)):
+    path = os.path.join(out_dir, f"{split}.h5")
+    try:
+      with mpm_io.open_file(path) as f:
+        names = sorted(f.keys())
+        if len(names) != count:
+          problems.append(f"{path}: {len(names)} trajectories, expected "
+                          f"{count}")
+        for i, name in enumerate(names):
+          where = f"{path}:{name}"
+          try:
+            t = mpm_io.read_group(f[name])
+          except mpm_io.FormatError as e:
+            problems.append(str(e))
+            continue
+          item = items.get((split, i))
+          if item is None or t.scene != item.scene or t.seed != item.seed:
+            problems.append(f"{where}: scene or seed differs from the plan "
+                            f"for {split} trajectory {i}")
+            continue
+          expected = (spec.num_frames, item.scene.granular.num_particles, 2)
+          if t.positions.shape != expected:
+            problems.append(f"{where}: positions shape {t.positions.shape}, "
+                            f"expected {expected}")
+          elif i < reproduce:
+            scene = dataclasses.replace(item.scene,
+                                        num_frames=reproduce_frames)
+            again = simulation.simulate(scene).positions
+            err = float(np.max(np.abs(again - t.positions[:reproduce_frames])))
+            if err > 1e-5:
+              problems.append(f"{where}: seed {t.seed} does not reproduce "
+                              f"the first {reproduce_frames} frames (max "
+                              f"difference {err:.2e} m)")
+    except mpm_io.FormatError as e:
+      problems.append(str(e))
+  return problems
