@@ -11,6 +11,10 @@ average and moving it (an obstacle's x) changes the result smoothly.
 Only nodes within reach of sand get a condition: the ``BoundaryField`` lists
 them (a band along the surfaces, not the whole grid), so this costs in
 proportion to the length of the boundary.
+
+The grid condition alone lets a particle drift up to about a cell into sharp
+obstacle corners, so each particle is also pushed back out along the signed
+distance interpolated from the nodes (``project_particles``).
 """
 
 import jax
@@ -32,17 +36,19 @@ class BoundaryField:
 
   Attributes:
     index: int32 [B] flat node indices; unique, except padding entries, which
-      all point at node 0, a node no particle reaches.
+      all point at node 0 (no particle reaches it) with zero weights.
     solid_normal: [B, 2] outward unit normal of the nearest solid.
     solid_weight: [B] how fully the solid condition acts, in [0, 1].
     wall_normal: [B, 2] inward normals (+-1, 0) and (0, +-1) of the box walls.
     wall_weight: [B, 2] weights of the x-wall and the y-wall conditions.
+    phi: [G] signed distance (m) to the solids at every node.
   """
   index: jax.Array
   solid_normal: jax.Array
   solid_weight: jax.Array
   wall_normal: jax.Array
   wall_weight: jax.Array
+  phi: jax.Array
 
 
 def _soft_weight(phi, dx):
@@ -86,20 +92,26 @@ def select_nodes(spec: transfer.GridSpec, width: float, height: float,
 def make_field(spec: transfer.GridSpec, index: jax.Array, width: float,
                height: float, ramp: geometry.RampParams,
                obstacles: tuple[geometry.ObstacleParams, ...]) -> BoundaryField:
-  """Boundary data at nodes ``index`` [B]; differentiable in the geometry."""
+  """Boundary data at nodes ``index`` [B]; differentiable in the geometry.
+
+  Entries with index 0 are padding and get zero weights.
+  """
   p = (jnp.asarray([spec.origin]) + spec.dx * jnp.stack(
       [index // spec.shape[1], index % spec.shape[1]], -1).astype(jnp.float32))
   sdf = lambda q: geometry.solid_sdf(ramp, obstacles, q)
   phi, grad = jax.vmap(jax.value_and_grad(sdf))(p)
   normal = grad * jax.lax.rsqrt(jnp.maximum(jnp.sum(grad**2, -1), 1e-12))[:, None]
   dist_x, dist_y, sign_x, sign_y = _wall_distances(p, width, height)
+  real = (index > 0).astype(phi.dtype)
+  nodes = jnp.asarray(spec.node_positions(), jnp.float32)
   return BoundaryField(
       index=index,
       solid_normal=normal,
-      solid_weight=_soft_weight(phi, spec.dx),
+      solid_weight=_soft_weight(phi, spec.dx) * real,
       wall_normal=jnp.stack([sign_x, sign_y], -1),
       wall_weight=jnp.stack([_soft_weight(dist_x, spec.dx),
-                             _soft_weight(dist_y, spec.dx)], -1))
+                             _soft_weight(dist_y, spec.dx)], -1) * real[:, None],
+      phi=sdf(nodes))
 
 
 def coulomb(v, normal, weight, mu):
@@ -139,3 +151,32 @@ def apply(field: BoundaryField, grid_v: jax.Array, boundary_friction,
   v = coulomb(v, jnp.concatenate([zeros, field.wall_normal[:, 1:]], -1),
               field.wall_weight[:, 1], wall_friction)
   return grid_v.at[field.index].set(v)
+
+
+def project_particles(field: BoundaryField, st: transfer.Stencil,
+                      x_new: jax.Array, x_old: jax.Array, dx: float):
+  """Pushes particles that moved into a solid back onto its surface.
+
+  The signed distance at the old position and its gradient come from the
+  nodes with the particle's own stencil (quadratic B-splines reproduce linear
+  fields, and 4/dx^2 sum_i w_i phi_i (x_i - x_p) is the MLS gradient); the
+  new position's distance is extrapolated along the step.
+
+  Args:
+    field: boundary data (its ``phi``).
+    st: stencils of the old positions ``x_old`` [N, 2].
+    x_new: [N, 2] positions after advection (m).
+    dx: grid spacing (m).
+
+  Returns:
+    [N, 2] positions with phi >= 0 (to first order).
+  """
+  phi_i = field.phi[st.index]                                # [N, S]
+  w_phi = st.weight * phi_i
+  phi = jnp.sum(w_phi, -1)
+  grad = (4.0 / dx**2) * jnp.sum(w_phi[..., None] * st.offset, 1)  # [N, 2]
+  phi_new = phi + jnp.sum(grad * (x_new - x_old), -1)
+  g_sq = jnp.sum(grad * grad, -1)
+  inv = jax.lax.rsqrt(jnp.where(g_sq > 0, g_sq, 1.0)) * (g_sq > 0)
+  push = jnp.maximum(-phi_new, 0.0) * inv
+  return x_new + push[:, None] * grad * inv[:, None]

@@ -43,12 +43,14 @@ class Trajectory:
   """One trajectory and its scene.
 
   Attributes:
-    positions: float32 [T, N, 2] sand positions (m); frame 0 is the start.
+    positions: float32 [T, N, 2] moving particle positions (m); frame 0 is
+      the start.
     boundary_positions: float32 [Nb, 2] static boundary particles (m).
     boundary_type: int32 [Nb] (``mpm.RAMP_TYPE`` or ``mpm.OBSTACLE_TYPE``).
     scene: the scene simulated.
     seed: the sampler seed (-1 when the scene was not sampled).
     wall_time_s: simulation time, compilation excluded (s).
+    particle_type: int32 [N]; default all ``mpm.SAND_TYPE``.
   """
   positions: np.ndarray
   boundary_positions: np.ndarray
@@ -56,10 +58,12 @@ class Trajectory:
   scene: scene_lib.Scene
   seed: int = -1
   wall_time_s: float = float("nan")
+  particle_type: np.ndarray | None = None
 
-  @property
-  def particle_type(self) -> np.ndarray:
-    return np.full(self.positions.shape[1], geometry.SAND_TYPE, np.int32)
+  def __post_init__(self):
+    if self.particle_type is None:
+      object.__setattr__(self, "particle_type", np.full(
+          np.shape(self.positions)[1], geometry.SAND_TYPE, np.int32))
 
   @classmethod
   def from_result(cls, result, seed: int = -1) -> "Trajectory":
@@ -180,7 +184,8 @@ def write_group(f: h5py.File, name: str, t: Trajectory) -> None:
   # random 7-frame window then reads in ~0.1 ms (DESIGN.md).
   g.create_dataset("positions", data=np.asarray(t.positions, np.float32),
                    chunks=(1,) + t.positions.shape[1:])
-  g.create_dataset("particle_type", data=t.particle_type)
+  g.create_dataset("particle_type", data=np.asarray(t.particle_type,
+                                                   np.int32))
   g.create_dataset("boundary_positions",
                    data=np.asarray(t.boundary_positions, np.float32))
   g.create_dataset("boundary_type", data=np.asarray(t.boundary_type, np.int32))
@@ -196,6 +201,9 @@ def _check_trajectory(t: Trajectory) -> None:
   if not np.all(np.isfinite(x)):
     raise ValueError(f"positions of scene {t.scene.name!r} are not finite; "
                      "refusing to write them as data")
+  if np.shape(t.particle_type) != (x.shape[1],):
+    raise ValueError(f"particle_type: expected [{x.shape[1]}], got "
+                     f"{np.shape(t.particle_type)}")
   if np.asarray(t.boundary_positions).shape != (len(t.boundary_type), 2):
     raise ValueError("boundary_positions: expected [Nb, 2] matching "
                      f"boundary_type [Nb], got "
@@ -214,7 +222,8 @@ def open_file(path: str) -> h5py.File:
   version = f.attrs.get("format_version")
   if version != FORMAT_VERSION:
     f.close()
-    raise FormatError(f"{path}: format_version {version!r}; this reader "
+    shown = "missing" if version is None else str(np.asarray(version).item())
+    raise FormatError(f"{path}: format_version {shown}; this reader "
                       f"supports {FORMAT_VERSION}")
   return f
 
@@ -223,6 +232,7 @@ def read_group(g: h5py.Group) -> Trajectory:
   """Reads one trajectory group, checking shapes."""
   try:
     positions = g["positions"][()]
+    particle_type = g["particle_type"][()]
     boundary_positions = g["boundary_positions"][()]
     boundary_type = g["boundary_type"][()]
     scene = scene_lib.Scene.from_json(g.attrs["scene"])
@@ -231,7 +241,7 @@ def read_group(g: h5py.Group) -> Trajectory:
     raise FormatError(f"{g.file.filename}:{g.name}: missing or unreadable "
                       f"entry ({e})") from e
   t = Trajectory(positions, boundary_positions, boundary_type, scene, seed,
-                 wall_time)
+                 wall_time, particle_type)
   try:
     _check_trajectory(t)
   except ValueError as e:

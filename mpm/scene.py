@@ -339,6 +339,10 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
                      f"{domain.height:g}")
   spacing = _number(gd, "spacing", Granular.spacing, "granular", 0,
                     min(x1 - x0, y1 - y0), lo_open=True)
+  if np.all(ramp.height(np.linspace(x0, x1, 101)) >= y1):
+    raise ValueError(f"granular.box = {list(box)}: lies inside the ramp "
+                     "(the ramp is above y_max everywhere in [x_min, x_max]); "
+                     "allowed: a box reaching above the ramp surface")
   num_particles = gd.get("num_particles", None)
   if num_particles is not None:
     num_particles = _integer(gd, "num_particles", None, "granular", 1)

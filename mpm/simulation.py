@@ -122,6 +122,11 @@ def setup(scene: scene_lib.Scene, x0: np.ndarray | None = None, *,
   if x0 is None:
     x0 = geometry.granular_particles(scene)
   x0 = np.asarray(x0, np.float32)
+  inside = ((x0 >= 0) & (x0 <= [scene.domain.width, scene.domain.height]))
+  if x0.ndim != 2 or x0.shape[1] != 2 or len(x0) == 0 or not inside.all():
+    raise ValueError(f"x0: expected [N >= 1, 2] positions inside the domain "
+                     f"[0, {scene.domain.width:g}] x [0, "
+                     f"{scene.domain.height:g}], got shape {x0.shape}")
   n = len(x0)
   spec = transfer.GridSpec.covering(scene.domain.width, scene.domain.height,
                                     scene.dx)
@@ -232,7 +237,8 @@ def pad_setup(s: Setup, n_particles: int, n_nodes: int) -> Setup:
   field = boundary.BoundaryField(
       index=zeros(f.index, kb), solid_normal=edge(f.solid_normal, kb),
       solid_weight=zeros(f.solid_weight, kb),
-      wall_normal=edge(f.wall_normal, kb), wall_weight=zeros(f.wall_weight, kb))
+      wall_normal=edge(f.wall_normal, kb), wall_weight=zeros(f.wall_weight, kb),
+      phi=f.phi)
   return dataclasses.replace(s, state=state, field=field)
 
 
@@ -289,9 +295,12 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
         compiled(state, params, field))
     wall_time += time.perf_counter() - start
     x, vmax, finite = np.asarray(x), np.asarray(vmax), np.asarray(finite)
+    # The last chunk may run past the final frame; those frames are dropped
+    # unchecked.
+    keep = min(frames, first.scene.num_frames - 1 - chunk * frames)
     for b, s in enumerate(setups):
-      _check(s.scene.name, 1 + chunk * frames, pick(finite, b), pick(vmax, b),
-             s.max_speed)
+      _check(s.scene.name, 1 + chunk * frames, pick(finite, b)[:keep],
+             pick(vmax, b)[:keep], s.max_speed)
     positions.append(x)
     speeds.append(vmax)
     if progress is not None:

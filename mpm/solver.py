@@ -101,7 +101,8 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   v, C = transfer.g2p(st, grid_v, spec.dx)
   v = v * active[:, None]
   C = C * active[:, None, None]
-  x = jnp.clip(state.x + dt * v, 0.0, params.domain[None, :])
+  x = boundary.project_particles(field, st, state.x + dt * v, state.x, spec.dx)
+  x = jnp.clip(x, 0.0, params.domain[None, :])
   F = state.F + dt * jnp.sum(C[..., :, :, None] * state.F[..., None, :, :], -2)
   F, vc = constitutive.project(F, state.volume_correction, mu, lam, alpha)
   max_speed_sq = jnp.max(jnp.sum(v * v, -1))

@@ -47,8 +47,8 @@ class GridSpec:
                pad: int = 3) -> "GridSpec":
     """A grid over [0, width] x [0, height] with ``pad`` cells beyond it.
 
-    The padding keeps every stencil of a particle inside (or half a cell
-    outside) the box on the grid.
+    A particle inside the box has stencil nodes at most one cell outside it,
+    so the padding keeps every stencil on the grid with room to spare.
     """
     nx = int(math.ceil(width / dx - 1e-9)) + 1 + 2 * pad
     ny = int(math.ceil(height / dx - 1e-9)) + 1 + 2 * pad

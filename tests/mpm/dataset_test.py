@@ -1,0 +1,232 @@
+"""Tests for `mpm.dataset` and `mpm.io`: generation, resume, files, errors."""
+
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+from absl.testing import absltest
+import h5py
+import numpy as np
+
+from mpm import dataset
+from mpm import io as mpm_io
+
+SPEC = dataset.DatasetSpec(num_train=3, num_test=2, num_frames=12, seed=5,
+                           spacing=0.01, connectivity_radius=0.03)
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))
+
+
+def _positions(path):
+  return [t.positions for t in mpm_io.read_trajectories(path)]
+
+
+class DatasetTest(absltest.TestCase):
+
+  @classmethod
+  def setUpClass(cls):
+    super().setUpClass()
+    cls._tmp = tempfile.TemporaryDirectory()
+    cls.ref = os.path.join(cls._tmp.name, "ref")
+    dataset.generate(SPEC, cls.ref, workers=1)
+
+  @classmethod
+  def tearDownClass(cls):
+    cls._tmp.cleanup()
+    super().tearDownClass()
+
+  def test_files_and_round_trip(self):
+    self.assertEqual(sorted(os.listdir(self.ref)),
+                     ["metadata.json", "test.h5", "train.h5"])
+    train = list(mpm_io.read_trajectories(os.path.join(self.ref, "train.h5")))
+    self.assertLen(train, SPEC.num_train)
+    for item, t in zip(dataset.plan(SPEC), train):
+      self.assertEqual(t.scene, item.scene)
+      self.assertEqual(t.seed, item.seed)
+      self.assertEqual(t.positions.shape,
+                       (SPEC.num_frames, item.scene.granular.num_particles, 2))
+      self.assertEqual(t.positions.dtype, np.float32)
+      self.assertGreater(t.wall_time_s, 0)
+    header = mpm_io.read_header(os.path.join(self.ref, "test.h5"))
+    for key in ("format_version", "dim", "frame_dt", "bounds",
+                "connectivity_radius", "sequence_length", "vel_mean",
+                "vel_std", "acc_mean", "acc_std"):
+      self.assertIn(key, header)
+    self.assertEqual(header["sequence_length"], SPEC.num_frames)
+
+  def test_statistics_from_training_split_only(self):
+    train = _positions(os.path.join(self.ref, "train.h5"))
+    v = np.concatenate([np.diff(x.astype(np.float64), axis=0).reshape(-1, 2)
+                        for x in train])
+    a = np.concatenate([np.diff(x.astype(np.float64), 2, axis=0).reshape(-1, 2)
+                        for x in train])
+    for split in ("train.h5", "test.h5"):
+      header = mpm_io.read_header(os.path.join(self.ref, split))
+      np.testing.assert_allclose(header["vel_mean"], v.mean(0), rtol=1e-6,
+                                 atol=1e-12)
+      np.testing.assert_allclose(header["vel_std"], v.std(0), rtol=1e-5)
+      np.testing.assert_allclose(header["acc_mean"], a.mean(0), rtol=1e-5,
+                                 atol=1e-12)
+      np.testing.assert_allclose(header["acc_std"], a.std(0), rtol=1e-5)
+
+  def test_test_split_covers_the_paper_breakdowns(self):
+    spec = dataclasses.replace(SPEC, num_test=14)
+    tests = [p for p in dataset.plan(spec) if p.split == "test"]
+    groups = {dataset.group_of(p.scene.name) for p in tests}
+    self.assertEqual(groups, {g[0] for g in dataset.TEST_GROUPS})
+    counts = {len(p.scene.obstacles) for p in tests}
+    self.assertEqual(counts, {0, 1, 2})
+    particles = {p.scene.granular.num_particles for p in tests}
+    self.assertEqual(particles, {spec.particles(n)
+                                 for n in dataset.TEST_PARTICLES})
+    rect_x = {o.x for p in tests for o in p.scene.obstacles
+              if dataset.group_of(p.scene.name).startswith("rectangle")}
+    self.assertEqual(rect_x, {0.6, 1.0, 1.3})
+    train_shapes = {o.shape for p in dataset.plan(spec) if p.split == "train"
+                    for o in p.scene.obstacles}
+    self.assertNotIn("triangle", train_shapes)
+
+  def test_deterministic(self):
+    with tempfile.TemporaryDirectory() as d:
+      dataset.generate(SPEC, d, workers=1)
+      for split in ("train.h5", "test.h5"):
+        for a, b in zip(_positions(os.path.join(d, split)),
+                        _positions(os.path.join(self.ref, split))):
+          np.testing.assert_array_equal(a, b)
+
+  def test_resume_after_kill_and_half_written_files(self):
+    with tempfile.TemporaryDirectory() as d:
+      script = (
+          "import dataclasses, sys\n"
+          "from mpm import dataset\n"
+          f"spec = dataset.DatasetSpec(**{dataclasses.asdict(SPEC)!r})\n"
+          "dataset.generate(spec, sys.argv[1], workers=1)\n")
+      env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
+      proc = subprocess.Popen([sys.executable, "-c", script, d], env=env,
+                              stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+      parts = os.path.join(d, "parts")
+      deadline = time.time() + 120
+      while time.time() < deadline and proc.poll() is None:
+        if os.path.isdir(parts) and any(f.endswith(".h5")
+                                        for f in os.listdir(parts)):
+          break
+        time.sleep(0.05)
+      proc.send_signal(signal.SIGKILL)
+      proc.wait()
+      self.assertFalse(os.path.exists(os.path.join(d, "metadata.json")),
+                       "the writer finished before it could be killed")
+      # What a kill mid-write leaves: a temporary file and (had the rename
+      # not been atomic) a truncated part. Both must be redone.
+      with open(os.path.join(parts, "test_00001.h5.tmp-12345"), "wb") as f:
+        f.write(b"\x89HDF half written")
+      with open(os.path.join(parts, "test_00000.h5"), "wb") as f:
+        f.write(b"\x89HDF truncated")
+      done_before = {f: os.path.getmtime(os.path.join(parts, f))
+                     for f in os.listdir(parts) if f.startswith("train_")}
+      calls = []
+      dataset.generate(SPEC, d, workers=1,
+                       progress=lambda done, total, wall: calls.append(done))
+      self.assertEqual(calls[0], len(done_before),
+                       "finished parts from the killed run were redone")
+      self.assertEqual(sorted(os.listdir(d)),
+                       ["metadata.json", "test.h5", "train.h5"])
+      for split in ("train.h5", "test.h5"):
+        got, ref = (_positions(os.path.join(d, split)),
+                    _positions(os.path.join(self.ref, split)))
+        self.assertEqual(len(got), len(ref))
+        for a, b in zip(got, ref):
+          np.testing.assert_array_equal(a, b)
+
+  def test_verify_accepts_sound_and_reports_broken(self):
+    self.assertEqual(dataset.verify(self.ref, reproduce=1), [])
+    with tempfile.TemporaryDirectory() as d:
+      for name in os.listdir(self.ref):
+        with open(os.path.join(self.ref, name), "rb") as src, open(
+            os.path.join(d, name), "wb") as dst:
+          dst.write(src.read())
+      with h5py.File(os.path.join(d, "train.h5"), "a") as f:
+        f["00001/positions"][3, 0, 0] = np.nan
+        f["00002/positions"][1, 0, 0] += 0.01
+      problems = dataset.verify(d, reproduce=3)
+      self.assertTrue(any("00001" in p and "not finite" in p
+                          for p in problems), problems)
+      self.assertTrue(any("00002" in p and "does not reproduce" in p
+                          for p in problems), problems)
+
+
+class FileErrorTest(absltest.TestCase):
+
+  def setUp(self):
+    super().setUp()
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    self.dir = tmp.name
+
+  def _write(self, name, mutate):
+    path = os.path.join(self.dir, name)
+    with h5py.File(path, "w") as f:
+      mutate(f)
+    return path
+
+  def test_missing_file(self):
+    with self.assertRaisesRegex(mpm_io.FormatError, "no such trajectory file"):
+      mpm_io.read_header(os.path.join(self.dir, "nope.h5"))
+
+  def test_corrupt_file(self):
+    path = os.path.join(self.dir, "bad.h5")
+    with open(path, "wb") as f:
+      f.write(b"not an hdf5 file at all")
+    with self.assertRaisesRegex(mpm_io.FormatError, "not a readable HDF5"):
+      list(mpm_io.read_trajectories(path))
+
+  def test_wrong_format_version(self):
+    path = self._write("v.h5", lambda f: f.attrs.update(format_version=99))
+    with self.assertRaisesRegex(mpm_io.FormatError, "format_version 99"):
+      list(mpm_io.read_trajectories(path))
+
+  def test_wrong_shapes(self):
+    def mutate(f):
+      f.attrs["format_version"] = mpm_io.FORMAT_VERSION
+      g = f.create_group("00000")
+      g["positions"] = np.zeros((5, 3), np.float32)
+      g["particle_type"] = np.zeros(3, np.int32)
+      g["boundary_positions"] = np.zeros((2, 2), np.float32)
+      g["boundary_type"] = np.zeros(2, np.int32)
+      g.attrs["scene"] = '{"num_frames": 5}'
+      g.attrs["seed"] = 0
+      g.attrs["wall_time_s"] = 0.0
+    path = self._write("s.h5", mutate)
+    with self.assertRaisesRegex(mpm_io.FormatError, r"expected \[T, N, 2\]"):
+      list(mpm_io.read_trajectories(path))
+
+  def test_missing_entry(self):
+    def mutate(f):
+      f.attrs["format_version"] = mpm_io.FORMAT_VERSION
+      f.create_group("00000")
+    path = self._write("m.h5", mutate)
+    with self.assertRaisesRegex(mpm_io.FormatError, "missing or unreadable"):
+      list(mpm_io.read_trajectories(path))
+
+  def test_incomplete_dataset(self):
+    self.assertEqual(len(dataset.verify(self.dir)), 1)
+    self.assertIn("incomplete", dataset.verify(self.dir)[0])
+
+  def test_non_finite_positions_are_not_written(self):
+    t = mpm_io.Trajectory(np.full((3, 2, 2), np.nan, np.float32),
+                          np.zeros((1, 2), np.float32), np.zeros(1, np.int32),
+                          dataset.plan(SPEC)[0].scene)
+    path = os.path.join(self.dir, "nan.h5")
+    with self.assertRaisesRegex(ValueError, "not finite"):
+      mpm_io.write_trajectories(path, [t], stats={
+          k: np.zeros(2) for k in ("vel_mean", "vel_std", "acc_mean",
+                                   "acc_std")})
+    self.assertFalse(os.path.exists(path))
+    self.assertEqual(os.listdir(self.dir), [])
+
+
+if __name__ == "__main__":
+  absltest.main()
