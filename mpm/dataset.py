@@ -261,6 +261,7 @@ def verify(out_dir: str, *, reproduce: int = 2,
   except mpm_io.FormatError as e:
     return [str(e)]
   items = {(it.split, it.index): it for it in plan(spec)}
+  reproduce_frames = min(reproduce_frames, spec.num_frames)
   problems = []
   for split, count in (("train", spec.num_train), ("test", spec.num_test)):
     path = os.path.join(out_dir, f"{split}.h5")
