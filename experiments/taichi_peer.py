@@ -8,15 +8,23 @@ and checked against each other.
   three cells of padding), dt and substeps per frame;
 * quadratic B-spline APIC P2G/G2P with the MLS-MPM stress momentum
   ``-dt V 4/dx^2 tau``;
-* Hencky elasticity, tau = U diag(2 mu eps + lam tr eps) U^T, from ``ti.svd``;
+* Hencky elasticity, tau = U diag(2 mu eps + lam tr eps) U^T, eps = log sigma
+  from a 2 x 2 SVD (the closed form of ``mpm.linalg.svd2x2`` by default;
+  ``ti.svd`` on request, which is not the same physics: see ``SVD_KINDS``);
 * the Drucker-Prager return map with volume correction on the singular values,
   exactly as ``mpm.constitutive.project_principal``: alpha = sin(phi)/sqrt(2),
   delta_gamma = ||eps_hat|| + (lam + mu)/mu alpha (tr eps + v_c);
 * gravity on grid velocities, then the soft-weighted Coulomb projection
   (``mpm.boundary.coulomb``: solid, x-wall, y-wall) on the nodes listed in
   ``setup.field``, copied into Taichi fields;
-* positions clamped to the domain, F <- (I + dt C) F, the largest speed of the
-  substep (as the JAX substep returns it).
+* particles that stepped into a solid pushed back along the signed distance
+  interpolated from the nodes (``mpm.boundary.project_particles``, when the
+  field carries the node distances ``phi``), then clamped to the domain;
+* F <- (I + dt C) F, and the largest speed of the substep (as the JAX substep
+  returns it).
+
+Padding particles (zero volume) and padding boundary entries (zero weights)
+of ``mpm.setup``'s buckets are carried along as the JAX solver carries them.
 
 Taichi is an optional dependency (``pip install -e .[bench]``): this module
 imports it at the top, so import this module lazily.
@@ -145,6 +153,13 @@ class TaichiMPM:
     self.b_wall_normal = ti.Vector.field(2, ti.f32, nb)
     self.b_wall_weight = ti.Vector.field(2, ti.f32, nb)
     self.max_speed_sq = ti.field(ti.f32, ())
+    # Signed distance to the solids at every node, for the particle
+    # projection (present when the solver has one).
+    self.project_particles = hasattr(field, "phi")
+    self.grid_phi = ti.field(ti.f32, spec.shape)
+    if self.project_particles:
+      self.grid_phi.from_numpy(
+          np.asarray(field.phi, np.float32).reshape(spec.shape))
 
     self.b_index.from_numpy(np.asarray(field.index, np.int32))
     self.b_solid_normal.from_numpy(np.asarray(field.solid_normal, np.float32))
@@ -291,11 +306,18 @@ class TaichiMPM:
       b = ti.cast(base, ti.i32)
       new_v = ti.Vector([0.0, 0.0])
       new_C = ti.Matrix([[0.0, 0.0], [0.0, 0.0]])
+      phi = 0.0
+      grad = ti.Vector([0.0, 0.0])
       for i, j in ti.static(ti.ndrange(3, 3)):
         dpos = (ti.Vector([i, j], ti.f32) - fx) * self.dx
-        wv = w[i][0] * w[j][1] * self.grid_mv[b[0] + i, b[1] + j]
+        weight = w[i][0] * w[j][1]
+        wv = weight * self.grid_mv[b[0] + i, b[1] + j]
         new_v += wv
         new_C += wv.outer_product(dpos)
+        if ti.static(self.project_particles):
+          w_phi = weight * self.grid_phi[b[0] + i, b[1] + j]
+          phi += w_phi
+          grad += w_phi * dpos
       new_C *= 4.0 * self.inv_dx * self.inv_dx
       if self.vol[p] <= 0:  # padding particle: does not move
         new_v = ti.Vector([0.0, 0.0])
@@ -303,6 +325,16 @@ class TaichiMPM:
       self.v[p] = new_v
       self.C[p] = new_C
       x = self.x[p] + self.dt * new_v
+      if ti.static(self.project_particles):
+        # Out of the solid along the MLS gradient of the node distances,
+        # the distance extrapolated along the step.
+        grad *= 4.0 * self.inv_dx * self.inv_dx
+        phi_new = phi + grad.dot(x - self.x[p])
+        g_sq = grad.dot(grad)
+        inv = 0.0
+        if g_sq > 0:
+          inv = 1.0 / ti.sqrt(g_sq)
+        x += ti.max(-phi_new, 0.0) * inv * inv * grad
       self.x[p] = ti.Vector([ti.min(ti.max(x[0], 0.0), wx),
                              ti.min(ti.max(x[1], 0.0), wy)])
       F = self.F[p] + self.dt * new_C @ self.F[p]
