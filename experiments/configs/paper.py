@@ -1,4 +1,4 @@
-"""The paper's settings: 1000 training and 100 test trajectories of 600 frames."""
+"""The paper's settings: dataset (Table 1) and the GNS of section II.A."""
 
 import ml_collections
 
@@ -14,7 +14,45 @@ def get_config() -> ml_collections.ConfigDict:
   config.dataset.seed = 0
   config.dataset.spacing = 0.005          # m; 700-1000 particles per scene
   config.dataset.connectivity_radius = 0.015
+  config.workers = 2                      # dataset generation processes
 
-  # Generation.
-  config.workers = 2                      # processes simulating in parallel
+  # Model: encoder, M message-passing steps, decoder.
+  config.model = ml_collections.ConfigDict()
+  config.model.latent_size = 128
+  config.model.hidden_layers = 2
+  config.model.num_message_passing_steps = 10
+  config.model.type_embedding_size = 16
+  config.model.split_first_layer = True
+  # None: the dataset's connectivity radius.
+  config.model.connectivity_radius = ml_collections.FieldReference(
+      None, field_type=float)
+
+  # Training.
+  config.train = ml_collections.ConfigDict()
+  config.train.seed = 0
+  config.train.batch_size = 2
+  config.train.num_steps = 2_000_000
+  config.train.input_frames = 6
+  config.train.noise_std = 3e-4           # m/frame, velocity random walk
+  config.train.lr_init = 1e-4
+  config.train.lr_min = 1e-6
+  config.train.lr_decay_steps = 5_000_000
+  config.train.clip_norm = 1.0
+  config.train.node_bucket = 128
+  config.train.capacity_multiplier = 1.25
+
+  # Checkpoints: every_steps, and the paper's V1-V4.
+  config.checkpoint = ml_collections.ConfigDict()
+  config.checkpoint.every_steps = 10_000
+  config.checkpoint.named_steps = (500_000, 1_000_000, 1_500_000, 2_000_000)
+  config.checkpoint.keep = 3
+
+  # Validation during training.
+  config.eval = ml_collections.ConfigDict()
+  config.eval.every_steps = 50_000
+  config.eval.num_windows = 64
+  config.eval.rollout_steps = 50
+  config.eval.num_rollouts = 4
+
+  config.log_every = 100
   return config

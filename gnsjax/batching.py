@@ -1,0 +1,89 @@
+"""Host-side assembly of training windows into padded batches (numpy).
+
+A window's nodes are its moving particles, then the boundary particles that
+are within the connectivity radius of a moving particle in the last input
+frame (the only boundary particles that get an edge: a scene pays only for
+what it contains), then padding. Each batch is padded to a multiple of
+``node_bucket`` nodes so that training compiles a handful of times.
+
+Shapes: B windows, C + 1 frames (C inputs and the target), N padded nodes.
+"""
+
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from gnsjax import data
+from gnsjax import graph
+
+
+class Batch(NamedTuple):
+  """Padded windows.
+
+  Attributes:
+    positions: float32 [B, C + 1, N, 2] (m); static nodes repeat their
+      position, padding nodes sit at ``graph.parking_positions``.
+    particle_type: int32 [B, N] (0 for padding).
+    moving: bool [B, N], the particles the model predicts (loss, noise).
+  """
+  positions: np.ndarray
+  particle_type: np.ndarray
+  moving: np.ndarray
+
+
+def near_boundary(moving: np.ndarray, boundary: np.ndarray,
+                  radius: float) -> np.ndarray:
+  """bool [Nb]: boundary particles within ``radius`` of any moving one.
+
+  Args:
+    moving: [N, 2]; boundary: [Nb, 2] (m).
+  """
+  if len(boundary) == 0 or len(moving) == 0:
+    return np.zeros(len(boundary), bool)
+  # Bin the moving particles in cells of size radius; check the 3x3 cells.
+  lo = np.minimum(moving.min(0), boundary.min(0))
+  cells = {}
+  for key, idx in zip(map(tuple, np.floor((moving - lo) / radius).astype(int)),
+                      range(len(moving))):
+    cells.setdefault(key, []).append(idx)
+  keep = np.zeros(len(boundary), bool)
+  bcell = np.floor((boundary - lo) / radius).astype(int)
+  r2 = radius * radius
+  for b, (cx, cy) in enumerate(bcell):
+    near = [i for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+            for i in cells.get((cx + dx, cy + dy), ())]
+    if near and np.min(np.sum((moving[near] - boundary[b])**2, -1)) < r2:
+      keep[b] = True
+  return keep
+
+
+def window_nodes(window: data.Window, radius: float):
+  """Nodes of one window: (positions [C + 1, n, 2], types [n], moving [n])."""
+  frames = window.positions.shape[0]
+  keep = near_boundary(window.positions[-2], window.boundary_positions,
+                       radius)
+  boundary = window.boundary_positions[keep]
+  positions = np.concatenate(
+      [window.positions,
+       np.broadcast_to(boundary[None], (frames,) + boundary.shape)], 1)
+  types = np.concatenate([window.particle_type, window.boundary_type[keep]])
+  moving = np.arange(len(types)) < window.positions.shape[1]
+  return positions.astype(np.float32), types.astype(np.int32), moving
+
+
+def make_batch(windows: Sequence[data.Window], spec: graph.GraphSpec,
+               node_bucket: int = 128) -> Batch:
+  """Pads the windows' nodes to one bucketed count and stacks them."""
+  nodes = [window_nodes(w, spec.radius) for w in windows]
+  n = max(len(t) for _, t, _ in nodes)
+  n = -(-n // node_bucket) * node_bucket
+  positions, types, moving = [], [], []
+  for p, t, m in nodes:
+    k = n - len(t)
+    park = graph.parking_positions(k, spec)
+    positions.append(np.concatenate(
+        [p, np.broadcast_to(park[None], (p.shape[0], k, 2))], 1))
+    types.append(np.concatenate([t, np.zeros(k, np.int32)]))
+    moving.append(np.concatenate([m, np.zeros(k, bool)]))
+  return Batch(np.stack(positions).astype(np.float32), np.stack(types),
+               np.stack(moving))

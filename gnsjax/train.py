@@ -1,0 +1,352 @@
+"""Training the learned simulator: ``train_and_evaluate(config, data, workdir)``.
+
+The only module that reads a config. Each step: B windows (a pure function of
+the step, see ``gnsjax.data.WindowDataset``), padded to a node bucket; random-
+walk noise from ``fold_in(key, step)``; a radius graph from the jax-md
+neighbour list (reallocated on the host when it overflows, never truncated);
+MSE of normalised acceleration; Adam with gradient clipping and the GNS
+exponential learning-rate decay. A run killed at any moment resumes from its
+last checkpoint and produces the same losses as an uninterrupted run.
+
+Data-parallel over all local devices: the batch axis is sharded over a
+one-axis mesh ("batch") and parameters are replicated (``jax.sharding``).
+"""
+
+import csv
+import dataclasses
+import functools
+import json
+import os
+import time
+from typing import Any
+
+from absl import logging
+import flax
+import jax
+import jax.numpy as jnp
+import ml_collections
+import numpy as np
+import optax
+import tensorboardX
+import tqdm
+
+from gnsjax import batching
+from gnsjax import checkpoint
+from gnsjax import data
+from gnsjax import features
+from gnsjax import graph
+from gnsjax import models
+from gnsjax import rollout as rollout_lib
+from gnsjax import simulator
+from mpm import io as mpm_io
+
+
+@flax.struct.dataclass
+class TrainState:
+  """step [], params, opt_state, key (the run's base PRNG key)."""
+  step: jax.Array
+  params: Any
+  opt_state: Any
+  key: jax.Array
+
+
+def create_model(model_config: ml_collections.ConfigDict
+                 ) -> models.EncodeProcessDecode:
+  return models.EncodeProcessDecode(
+      latent_size=model_config.latent_size,
+      hidden_layers=model_config.hidden_layers,
+      num_message_passing_steps=model_config.num_message_passing_steps,
+      type_embedding_size=model_config.type_embedding_size,
+      split_first_layer=model_config.split_first_layer)
+
+
+def learning_rate_schedule(lr_init: float, lr_min: float, decay_steps: int):
+  """GNS decay: lr_min + (lr_init - lr_min) 0.1^(step / decay_steps).
+
+  (optax.exponential_decay's end_value clamps instead of adding a floor.)
+  """
+  def schedule(step):
+    return lr_min + (lr_init - lr_min) * 0.1**(step / decay_steps)
+  return schedule
+
+
+def create_optimizer(train_config) -> optax.GradientTransformation:
+  schedule = learning_rate_schedule(train_config.lr_init, train_config.lr_min,
+                                    train_config.lr_decay_steps)
+  return optax.chain(optax.clip_by_global_norm(train_config.clip_norm),
+                     optax.adam(schedule))
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+  """What the dataset fixes: statistics, domain, radius (host values)."""
+  stats: features.Stats
+  bounds: np.ndarray
+  radius: float
+  spec: graph.GraphSpec
+
+  @property
+  def context(self) -> simulator.Context:
+    return simulator.Context(
+        features.Stats(*(jnp.asarray(s) for s in self.stats)),
+        jnp.asarray(self.bounds, jnp.float32))
+
+  def stats_dict(self) -> dict:
+    return {k: np.asarray(v).tolist() for k, v in self.stats._asdict().items()}
+
+
+def load_problem(data_dir: str, config) -> Problem:
+  train_path = data.split_path(data_dir, "train")
+  stats = features.Stats(*data.load_stats(train_path))
+  header = mpm_io.read_header(train_path)
+  radius = float(config.model.connectivity_radius or
+                 header["connectivity_radius"])
+  bounds = np.asarray(header["bounds"], np.float32)
+  spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
+                         config.train.capacity_multiplier)
+  return Problem(stats, bounds, radius, spec)
+
+
+def _config_dict(config) -> dict:
+  return json.loads(config.to_json_best_effort())
+
+
+def check_compatible(stored: dict, config) -> None:
+  """Refuses to resume a run whose model or data settings differ."""
+  current = _config_dict(config)
+  for section in ("model", "dataset"):
+    if stored.get(section) != current.get(section):
+      raise ValueError(
+          f"the checkpoint was trained with another config: its '{section}' "
+          f"section is {stored.get(section)}, this config has "
+          f"{current.get(section)}; use a new --workdir or the same config")
+
+
+def _mesh():
+  devices = np.array(jax.local_devices())
+  return jax.sharding.Mesh(devices, ("batch",))
+
+
+class Trainer:
+  """Compiled pieces of a run; see :func:`train_and_evaluate`."""
+
+  def __init__(self, config, problem: Problem):
+    self.config = config
+    self.problem = problem
+    self.model = create_model(config.model)
+    self.tx = create_optimizer(config.train)
+    self.mesh = _mesh()
+    self.batch_sharding = jax.sharding.NamedSharding(
+        self.mesh, jax.sharding.PartitionSpec("batch"))
+    self.replicated = jax.sharding.NamedSharding(
+        self.mesh, jax.sharding.PartitionSpec())
+    self._nbrs = {}  # padded node count -> batched neighbour list
+    ctx, radius = problem.context, problem.radius
+    noise_std = config.train.noise_std
+
+    def prepare(key, positions, moving):
+      keys = jax.random.split(key, positions.shape[0])
+      return jax.vmap(functools.partial(simulator.add_noise,
+                                        noise_std=noise_std))(
+                                            keys, positions, moving)
+
+    def batch_loss(params, inputs, target, types, moving, senders, receivers):
+      per_window = jax.vmap(
+          lambda i, t, ty, m, s, r: simulator.loss(
+              self.model, params, i, t, ty, m, s, r, ctx, radius))(
+                  inputs, target, types, moving, senders, receivers)
+      return jnp.mean(per_window)
+
+    def train_step(state, inputs, target, types, moving, senders, receivers):
+      loss, grads = jax.value_and_grad(batch_loss)(
+          state.params, inputs, target, types, moving, senders, receivers)
+      updates, opt_state = self.tx.update(grads, state.opt_state, state.params)
+      params = optax.apply_updates(state.params, updates)
+      return (state.replace(step=state.step + 1, params=params,
+                            opt_state=opt_state),
+              {"loss": loss, "grad_norm": optax.global_norm(grads)})
+
+    self.prepare = jax.jit(prepare)
+    self.eval_loss = jax.jit(batch_loss)
+    self.train_step = jax.jit(train_step, donate_argnums=0)
+
+  def init_state(self, seed: int) -> TrainState:
+    init_key, key = jax.random.split(jax.random.key(seed))
+    n, e = 8, 8
+    params = self.model.init(
+        init_key,
+        jnp.zeros((n, 2 * (self.config.train.input_frames - 1) + 4)),
+        jnp.zeros((n,), jnp.int32), jnp.zeros((e, 3)),
+        jnp.zeros((e,), jnp.int32), jnp.zeros((e,), jnp.int32))
+    state = TrainState(jnp.zeros((), jnp.int32), params,
+                       self.tx.init(params), key)
+    return jax.device_put(state, self.replicated)
+
+  def graph_edges(self, positions: jax.Array):
+    """Senders, receivers [B, E] of the last input frame [B, N, 2]."""
+    n = positions.shape[1]
+    spec = self.problem.spec
+    nbrs = self._nbrs.get(n)
+    if nbrs is None:
+      nbrs = graph.allocate_batch(spec, positions)
+    nbrs, _ = graph.update_or_reallocate(spec, positions, nbrs, batched=True)
+    self._nbrs[n] = nbrs
+    return _batched_edges(nbrs, n)
+
+  def batch_arrays(self, batch: batching.Batch, key: jax.Array,
+                   noise: bool = True):
+    put = lambda a: jax.device_put(a, self.batch_sharding)
+    positions, moving = put(batch.positions), put(batch.moving)
+    if noise:
+      inputs, target = self.prepare(key, positions, moving)
+    else:
+      inputs, target = positions[:, :-1], positions[:, -1]
+    senders, receivers = self.graph_edges(inputs[:, -1])
+    return (inputs, target, put(batch.particle_type), moving,
+            put(senders), put(receivers))
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _batched_edges(nbrs, n):
+  return jax.vmap(lambda nb: graph.edges(nb, n))(nbrs)
+
+
+def _windows(dataset: data.WindowDataset, step: int, batch_size: int):
+  return [dataset[step * batch_size + i] for i in range(batch_size)]
+
+
+def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
+             num_windows: int, rollout_steps: int, num_rollouts: int) -> dict:
+  """One-step loss on test windows (no noise), and rollout position MSE
+  against ground truth and a constant-velocity baseline."""
+  cfg = trainer.config
+  test_path = data.split_path(data_dir, "test")
+  metrics = {}
+  with data.WindowDataset(test_path, input_frames=cfg.train.input_frames,
+                          seed=0) as ds:
+    windows = [ds[k] for k in range(min(num_windows, len(ds)))]
+  losses = []
+  for i in range(0, len(windows), cfg.train.batch_size):
+    chunk = windows[i:i + cfg.train.batch_size]
+    if len(chunk) < cfg.train.batch_size:
+      break
+    batch = batching.make_batch(chunk, trainer.problem.spec,
+                                cfg.train.node_bucket)
+    arrays = trainer.batch_arrays(batch, None, noise=False)
+    losses.append(float(trainer.eval_loss(state.params, *arrays)))
+  if losses:
+    metrics["eval/one_step_loss"] = float(np.mean(losses))
+  if rollout_steps > 0 and num_rollouts > 0:
+    errors, baseline = [], []
+    for k, t in enumerate(data.trajectories(test_path)):
+      if k >= num_rollouts:
+        break
+      c = cfg.train.input_frames
+      steps = min(rollout_steps, len(t.positions) - c)
+      pred = rollout_lib.rollout_trajectory(
+          trainer.model, state.params, t, trainer.problem, steps, c)
+      truth = t.positions[c:c + steps]
+      errors.append(np.mean(np.sum((pred - truth)**2, -1)))
+      v = t.positions[c - 1] - t.positions[c - 2]
+      const = t.positions[c - 1][None] + v[None] * np.arange(
+          1, steps + 1)[:, None, None]
+      baseline.append(np.mean(np.sum((const - truth)**2, -1)))
+    metrics["eval/rollout_mse"] = float(np.mean(errors))
+    metrics["eval/rollout_mse_constant_velocity"] = float(np.mean(baseline))
+  return metrics
+
+
+_CSV_FIELDS = ["step", "loss", "grad_norm", "learning_rate", "steps_per_s",
+               "wall_time_s"]
+
+
+def _resume_csv(path: str, step: int) -> float:
+  """Drops rows logged after ``step`` (a killed run's, redone now) and
+  returns the training time [s] up to it."""
+  if not os.path.exists(path):
+    return 0.0
+  with open(path, newline="") as f:
+    rows = [r for r in csv.DictReader(f) if int(r["step"]) <= step]
+  tmp = f"{path}.tmp-{os.getpid()}"
+  with open(tmp, "w", newline="") as f:
+    writer = csv.DictWriter(f, fieldnames=_CSV_FIELDS, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+  os.replace(tmp, path)
+  return float(rows[-1]["wall_time_s"]) if rows else 0.0
+
+
+def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
+                       workdir: str) -> dict:
+  """Trains (or resumes) in ``workdir``; returns the last metrics."""
+  os.makedirs(workdir, exist_ok=True)
+  cfg, tcfg = config, config.train
+  if tcfg.batch_size % jax.local_device_count():
+    raise ValueError(f"train.batch_size = {tcfg.batch_size} must be a "
+                     f"multiple of the {jax.local_device_count()} devices")
+  problem = load_problem(data_dir, config)
+  trainer = Trainer(config, problem)
+  mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
+                            cfg.checkpoint.named_steps, cfg.checkpoint.keep)
+  config_dict = _config_dict(config)
+  state = trainer.init_state(tcfg.seed)
+  if mngr.latest_step() is not None:
+    check_compatible(checkpoint.read_config(mngr, mngr.latest_step()), config)
+    state, _, _ = checkpoint.restore(mngr, state)
+    state = jax.device_put(state, trainer.replicated)
+    logging.info("resumed from step %d", int(state.step))
+  mpm_io.write_json(os.path.join(workdir, "config.json"), config_dict)
+  mpm_io.write_json(os.path.join(workdir, "stats.json"), problem.stats_dict())
+
+  dataset = data.WindowDataset(data.split_path(data_dir, "train"),
+                               input_frames=tcfg.input_frames, seed=tcfg.seed)
+  writer = tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
+  csv_path = os.path.join(workdir, "metrics.csv")
+  schedule = learning_rate_schedule(tcfg.lr_init, tcfg.lr_min,
+                                    tcfg.lr_decay_steps)
+  start = int(state.step)
+  metrics = {}
+  trained_before = _resume_csv(csv_path, start)
+  run_start = last_time = time.perf_counter()
+  last_step = start
+  with open(csv_path, "a", newline="") as csv_file, tqdm.tqdm(
+      initial=start, total=tcfg.num_steps, unit="step") as bar:
+    out = csv.DictWriter(csv_file, fieldnames=_CSV_FIELDS,
+                         extrasaction="ignore")
+    if csv_file.tell() == 0:
+      out.writeheader()
+    for step in range(start, tcfg.num_steps):
+      batch = batching.make_batch(_windows(dataset, step, tcfg.batch_size),
+                                  problem.spec, tcfg.node_bucket)
+      arrays = trainer.batch_arrays(batch,
+                                    jax.random.fold_in(state.key, step))
+      state, step_metrics = trainer.train_step(state, *arrays)
+      done = step + 1
+      if done % cfg.log_every == 0 or done == tcfg.num_steps:
+        now = time.perf_counter()
+        metrics = {k: float(v) for k, v in step_metrics.items()}
+        metrics.update(learning_rate=float(schedule(step)),
+                       steps_per_s=(done - last_step) / (now - last_time),
+                       wall_time_s=trained_before + now - run_start)
+        last_time, last_step = now, done
+        out.writerow({"step": done, **metrics})
+        csv_file.flush()
+        for k in ("loss", "grad_norm", "learning_rate", "steps_per_s"):
+          writer.add_scalar(f"train/{k}", metrics[k], done)
+        bar.set_postfix(loss=f"{metrics['loss']:.4g}")
+      bar.update(1)
+      if cfg.eval.every_steps and (done % cfg.eval.every_steps == 0 or
+                                   done == tcfg.num_steps):
+        eval_metrics = evaluate(trainer, state, data_dir,
+                                cfg.eval.num_windows, cfg.eval.rollout_steps,
+                                cfg.eval.num_rollouts)
+        for k, v in eval_metrics.items():
+          writer.add_scalar(k, v, done)
+        logging.info("step %d: %s", done, eval_metrics)
+        metrics.update(eval_metrics)
+      checkpoint.save(mngr, done, state, config_dict, problem.stats_dict(),
+                      force=done == tcfg.num_steps)
+  writer.close()
+  dataset.close()
+  mngr.close()
+  return metrics

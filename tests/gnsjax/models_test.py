@@ -1,0 +1,157 @@
+"""Tests for `gnsjax.models`, `gnsjax.features` and `gnsjax.noise`."""
+
+from absl.testing import absltest
+from absl.testing import parameterized
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from gnsjax import features
+from gnsjax import models
+from gnsjax import noise
+
+N, E = 40, 200
+
+
+def _inputs(seed=0, n=N, e=E):
+  rng = np.random.default_rng(seed)
+  return (jnp.asarray(rng.normal(size=(n, 14)), jnp.float32),
+          jnp.asarray(rng.integers(0, 9, n), jnp.int32),
+          jnp.asarray(rng.normal(size=(e, 3)), jnp.float32),
+          jnp.asarray(rng.integers(0, n, e), jnp.int32),
+          jnp.asarray(rng.integers(0, n, e), jnp.int32))
+
+
+def _tiny(split=True):
+  return models.EncodeProcessDecode(latent_size=16, hidden_layers=2,
+                                    num_message_passing_steps=2,
+                                    type_embedding_size=4,
+                                    split_first_layer=split)
+
+
+class ModelTest(parameterized.TestCase):
+
+  def test_split_first_layer_equals_concatenated(self):
+    args = _inputs()
+    split, concat = _tiny(True), _tiny(False)
+    params = split.init(jax.random.key(0), *args)
+    mapped = {"params": dict(params["params"])}
+    for name in mapped["params"]:
+      if name.startswith("step_"):
+        mapped["params"][name] = models.split_to_concat_params(
+            params["params"][name])
+    # The mapped tree has exactly the concatenated model's structure.
+    self.assertEqual(
+        jax.tree.structure(concat.init(jax.random.key(1), *args)),
+        jax.tree.structure(mapped))
+    np.testing.assert_allclose(split.apply(params, *args),
+                               concat.apply(mapped, *args), atol=1e-5)
+
+  def test_flop_count_matches_xla(self):
+    args = _inputs(n=300, e=3000)
+    measured = {}
+    for split in (True, False):
+      m = models.EncodeProcessDecode(latent_size=32, num_message_passing_steps=2,
+                                     split_first_layer=split)
+      p = m.init(jax.random.key(0), *args)
+      cost = jax.jit(m.apply).lower(p, *args).compile().cost_analysis()
+      cost = cost[0] if isinstance(cost, list) else cost
+      measured[split] = cost["flops"]
+    saved = (models.processor_flops(300, 3000, 32, 2, 2, False) -
+             models.processor_flops(300, 3000, 32, 2, 2, True))
+    self.assertGreater(saved, 0)
+    np.testing.assert_allclose(measured[False] - measured[True], saved,
+                               rtol=0.02)
+
+  @parameterized.parameters(True, False)
+  def test_permutation_equivariant(self, split):
+    nf, pt, ef, s, r = _inputs(1)
+    model = _tiny(split)
+    params = model.init(jax.random.key(2), nf, pt, ef, s, r)
+    perm = np.random.default_rng(3).permutation(N)
+    inverse = np.argsort(perm)
+    out = model.apply(params, nf, pt, ef, s, r)
+    out_perm = model.apply(params, nf[perm], pt[perm], ef,
+                           jnp.asarray(inverse)[s], jnp.asarray(inverse)[r])
+    np.testing.assert_allclose(out_perm, out[perm], atol=1e-5)
+
+  def test_padding_edges_change_nothing(self):
+    nf, pt, ef, s, r = _inputs(4)
+    model = _tiny()
+    params = model.init(jax.random.key(0), nf, pt, ef, s, r)
+    pad = 50
+    out = model.apply(params, nf, pt, ef, s, r)
+    out_padded = model.apply(
+        params, nf, pt, jnp.concatenate([ef, jnp.ones((pad, 3))]),
+        jnp.concatenate([s, jnp.full(pad, N, jnp.int32)]),
+        jnp.concatenate([r, jnp.full(pad, N, jnp.int32)]))
+    np.testing.assert_allclose(out_padded, out, atol=1e-6)
+
+
+class FeaturesTest(absltest.TestCase):
+
+  def setUp(self):
+    super().setUp()
+    self.stats = features.Stats(jnp.array([0.1, -0.2]), jnp.array([2.0, 4.0]),
+                                jnp.array([0.0, -1.0]), jnp.array([0.5, 0.25]))
+
+  def test_node_features_by_hand(self):
+    # Two particles, 3 frames: velocities (1, 0), (2, 1) and (0, 0), (0, 0).
+    positions = jnp.array([[[0.5, 0.5], [0.2, 0.9]],
+                           [[1.5, 0.5], [0.2, 0.9]],
+                           [[3.5, 1.5], [0.2, 0.9]]])
+    bounds = jnp.array([[0.0, 4.0], [0.0, 1.0]])
+    got = np.asarray(features.node_features(positions, self.stats, bounds,
+                                            radius=0.5))
+    v0 = [(1 - 0.1) / 2, (0 + 0.2) / 4, (2 - 0.1) / 2, (1 + 0.2) / 4]
+    v1 = [(0 - 0.1) / 2, (0 + 0.2) / 4] * 2
+    # Walls of particle 0 at (3.5, 1.5): x-0=7, 4-x=1, y-0=3, 1-y=-1 (/R=.5).
+    w0 = [1.0, 1.0, 1.0, -1.0]
+    w1 = [0.4, 1.0, 1.0, 0.2]
+    np.testing.assert_allclose(got, [v0 + w0, v1 + w1], atol=1e-6)
+
+  def test_edge_features_by_hand(self):
+    position = jnp.array([[0.0, 0.0], [0.3, 0.4]])
+    got = features.edge_features(position, jnp.array([1, 0]),
+                                 jnp.array([0, 0]), radius=0.5)
+    np.testing.assert_allclose(got, [[0.6, 0.8, 1.0], [0.0, 0.0, 0.0]],
+                               atol=1e-6)
+
+  def test_integrate_inverts_target_acceleration(self):
+    rng = np.random.default_rng(0)
+    positions = jnp.asarray(rng.normal(size=(6, 10, 2)), jnp.float32)
+    target = jnp.asarray(rng.normal(size=(10, 2)), jnp.float32)
+    acc = features.target_acceleration(positions, target, self.stats)
+    np.testing.assert_allclose(features.integrate(positions, acc, self.stats),
+                               target, atol=1e-5)
+
+
+class NoiseTest(absltest.TestCase):
+
+  def test_random_walk_statistics(self):
+    std = 3e-4
+    n = noise.random_walk(jax.random.key(0), (7, 20000, 2), std)
+    n = np.asarray(n)
+    np.testing.assert_array_equal(n[0], 0.0)
+    v = np.diff(n, axis=0)                       # velocity noise, [6, N, 2]
+    # The walk's last velocity has std `std`; step k has std*sqrt(k/6).
+    for k in range(6):
+      np.testing.assert_allclose(v[k].std(), std * np.sqrt((k + 1) / 6),
+                                 rtol=0.03)
+    increments = np.diff(v, axis=0, prepend=0)
+    corr = np.corrcoef(increments[1].ravel(), increments[2].ravel())[0, 1]
+    self.assertLess(abs(corr), 0.03)
+    self.assertLess(abs(v.mean()), 3 * std / np.sqrt(v.size))
+
+  def test_adjusted_target_keeps_the_true_velocity(self):
+    rng = np.random.default_rng(1)
+    window = jnp.asarray(rng.normal(size=(7, 5, 2)), jnp.float32)
+    n = noise.random_walk(jax.random.key(1), (6, 5, 2), 1e-2)
+    noisy_last = window[5] + n[-1]
+    target = noise.adjust_target(window[6], n)
+    np.testing.assert_allclose(target - noisy_last, window[6] - window[5],
+                               atol=1e-6)
+
+
+if __name__ == "__main__":
+  absltest.main()
