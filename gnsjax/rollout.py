@@ -22,8 +22,9 @@ from gnsjax import simulator
 from mpm import io as mpm_io
 
 
-@functools.partial(jax.jit, static_argnames=("model", "spec", "length"))
-def _scan(model, params, window, types, moving, nbrs, context, spec, length):
+@functools.partial(jax.jit, static_argnames=("predictor", "spec", "length"))
+def _scan(predictor, params, window, types, moving, nbrs, context, spec,
+          length):
   """``length`` steps from ``window`` [C, N, 2]; returns positions [L, N, 2],
   overflow flags [L] and the last neighbour list."""
   n = window.shape[1]
@@ -32,8 +33,8 @@ def _scan(model, params, window, types, moving, nbrs, context, spec, length):
     w, nb = carry
     nb = graph.update(spec, w[-1], nb)
     senders, receivers = graph.edges(nb, n)
-    nxt = simulator.step(model, params, w, types, moving, senders, receivers,
-                         context, spec.radius)
+    nxt = simulator.step(predictor, params, w, types, moving, senders,
+                         receivers, context, spec.radius)
     w = jnp.concatenate([w[1:], nxt[None]], 0)
     return (w, nb), (nxt, nb.did_buffer_overflow)
 
@@ -42,14 +43,15 @@ def _scan(model, params, window, types, moving, nbrs, context, spec, length):
   return positions, overflow, nbrs
 
 
-def rollout(model, params, window: np.ndarray, types: np.ndarray,
+def rollout(predictor, params, window: np.ndarray, types: np.ndarray,
             moving: np.ndarray, n_steps: int, context: simulator.Context,
             spec: graph.GraphSpec, chunk: int = 50, nbrs=None,
             on_reallocate=None) -> np.ndarray:
   """Predicts ``n_steps`` frames after ``window``.
 
   Args:
-    model, params: the simulator.
+    predictor, params: the simulator (``simulator.ModelPredictor(model)``
+      and its parameters, or any predictor).
     window: [C, N, 2] input frames (m); static nodes repeat their position.
     types: int32 [N]; moving: bool [N].
     n_steps: T.
@@ -68,7 +70,7 @@ def rollout(model, params, window: np.ndarray, types: np.ndarray,
   done = 0
   while done < n_steps:
     positions, overflow, new_nbrs = _scan(
-        model, params, jnp.asarray(window), jnp.asarray(types),
+        predictor, params, jnp.asarray(window), jnp.asarray(types),
         jnp.asarray(moving), nbrs, context, spec, chunk)
     positions, overflow = np.asarray(positions), np.asarray(overflow)
     good = int(np.argmax(overflow)) if overflow.any() else chunk
@@ -103,6 +105,6 @@ def rollout_trajectory(model, params, t: mpm_io.Trajectory, problem,
   """Predicted sand positions [n_steps, Ns, 2] from a trajectory's first
   ``input_frames`` frames."""
   window, types, moving = trajectory_nodes(t, input_frames)
-  pred = rollout(model, params, window, types, moving, n_steps,
-                 problem.context, problem.spec)
+  pred = rollout(simulator.ModelPredictor(model), params, window, types,
+                 moving, n_steps, problem.context, problem.spec)
   return pred[:, :t.positions.shape[1]]

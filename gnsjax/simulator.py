@@ -4,13 +4,13 @@ Pure functions of arrays; the caller jits them. Shapes: C input frames,
 N nodes (padded), E edges (capacity of the neighbour list).
 """
 
+import dataclasses
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from gnsjax import features
-from gnsjax import graph
 from gnsjax import models
 from gnsjax import noise as noise_lib
 
@@ -38,11 +38,28 @@ def predict(model: models.EncodeProcessDecode, params, positions: jax.Array,
                      receivers)
 
 
-def step(model, params, positions, particle_type, moving, senders, receivers,
-         context, radius) -> jax.Array:
+@dataclasses.dataclass(frozen=True)
+class ModelPredictor:
+  """Predictor of normalised accelerations by the learned model.
+
+  A predictor is a hashable callable
+  ``(params, positions [C, N, 2], particle_type, senders, receivers, context,
+  radius) -> [N, 2]``; rollouts take it as a static argument, so the same
+  machinery runs the model, or an oracle in tests.
+  """
+  model: models.EncodeProcessDecode
+
+  def __call__(self, params, positions, particle_type, senders, receivers,
+               context, radius):
+    return predict(self.model, params, positions, particle_type, senders,
+                   receivers, context, radius)
+
+
+def step(predictor, params, positions, particle_type, moving, senders,
+         receivers, context, radius) -> jax.Array:
   """Next positions [N, 2]: moving nodes advance, the others stay."""
-  acc = predict(model, params, positions, particle_type, senders, receivers,
-                context, radius)
+  acc = predictor(params, positions, particle_type, senders, receivers,
+                  context, radius)
   nxt = features.integrate(positions, acc, context.stats)
   return jnp.where(moving[:, None], nxt, positions[-1])
 
@@ -69,8 +86,3 @@ def loss(model, params, inputs, target, particle_type, moving, senders,
   want = features.target_acceleration(inputs, target, context.stats)
   err = jnp.sum((acc - want)**2, -1) * moving
   return jnp.sum(err) / jnp.maximum(jnp.sum(moving), 1) / 2
-
-
-def edges_of(spec: graph.GraphSpec, nbrs) -> tuple[jax.Array, jax.Array]:
-  n = nbrs.reference_position.shape[0]
-  return graph.edges(nbrs, n)

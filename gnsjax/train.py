@@ -107,6 +107,43 @@ def load_problem(data_dir: str, config) -> Problem:
   return Problem(stats, bounds, radius, spec)
 
 
+# The keys a training config must have (experiments/configs/paper.py).
+CONFIG_KEYS = {
+    "model": ("latent_size", "hidden_layers", "num_message_passing_steps",
+              "type_embedding_size", "split_first_layer",
+              "connectivity_radius"),
+    "train": ("seed", "batch_size", "num_steps", "input_frames", "noise_std",
+              "lr_init", "lr_min", "lr_decay_steps", "clip_norm",
+              "node_bucket", "capacity_multiplier"),
+    "checkpoint": ("every_steps", "named_steps", "keep"),
+    "eval": ("every_steps", "num_windows", "rollout_steps", "num_rollouts"),
+}
+_OTHER_TOP_LEVEL = ("dataset", "workers", "log_every")
+
+
+def check_config(config) -> None:
+  """Raises ValueError naming any unknown or missing key."""
+  top = set(config.keys())
+  allowed = set(CONFIG_KEYS) | set(_OTHER_TOP_LEVEL)
+  if top - allowed:
+    raise ValueError(f"config: unknown key(s) {sorted(top - allowed)}; "
+                     f"allowed: {sorted(allowed)}")
+  for section, keys in CONFIG_KEYS.items():
+    if section not in top:
+      raise ValueError(f"config: missing section '{section}' with keys "
+                       f"{list(keys)}")
+    present = set(config[section].keys())
+    if present - set(keys):
+      raise ValueError(f"config.{section}: unknown key(s) "
+                       f"{sorted(present - set(keys))}; allowed: {list(keys)}")
+    if set(keys) - present:
+      raise ValueError(f"config.{section}: missing key(s) "
+                       f"{sorted(set(keys) - present)}")
+  if config.train.input_frames < 2:
+    raise ValueError(f"config.train.input_frames = "
+                     f"{config.train.input_frames}; allowed: >= 2")
+
+
 def _config_dict(config) -> dict:
   return json.loads(config.to_json_best_effort())
 
@@ -279,6 +316,7 @@ def _resume_csv(path: str, step: int) -> float:
 def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                        workdir: str) -> dict:
   """Trains (or resumes) in ``workdir``; returns the last metrics."""
+  check_config(config)
   os.makedirs(workdir, exist_ok=True)
   cfg, tcfg = config, config.train
   if tcfg.batch_size % jax.local_device_count():

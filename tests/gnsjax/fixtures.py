@@ -1,0 +1,36 @@
+"""Tiny datasets and configs shared by the gnsjax tests (cached per process)."""
+
+import functools
+import os
+import tempfile
+
+from experiments.configs import test as test_config
+from mpm import dataset
+
+# About 50 sand particles per scene (spacing 0.02 m), 16 frames.
+SPEC = dataset.DatasetSpec(num_train=2, num_test=2, num_frames=16, seed=11,
+                           spacing=0.02, connectivity_radius=0.06)
+_TMP = tempfile.TemporaryDirectory()
+
+
+@functools.lru_cache(maxsize=None)
+def tiny_dataset() -> str:
+  path = os.path.join(_TMP.name, "data")
+  dataset.generate(SPEC, path, workers=1)
+  return path
+
+
+def tiny_config(**train):
+  config = test_config.get_config()
+  config.dataset.num_train = SPEC.num_train
+  config.dataset.num_test = SPEC.num_test
+  config.dataset.num_frames = SPEC.num_frames
+  config.dataset.seed = SPEC.seed
+  config.dataset.spacing = SPEC.spacing
+  config.dataset.connectivity_radius = SPEC.connectivity_radius
+  config.model.num_message_passing_steps = 1
+  config.train.node_bucket = 32
+  config.eval.every_steps = 0
+  for key, value in train.items():
+    config.train[key] = value
+  return config
