@@ -1,6 +1,7 @@
 """Renders a trajectory file: an animation and a PNG grid of frames.
 
   python -m experiments.render --traj=traj.h5 --out=DIR [--index=0]
+  python -m experiments.render --traj=ROLL/truth.h5       --compare=ROLL/predicted.h5 --out=DIR      # MPM and GNS side by side
 """
 
 from absl import app
@@ -15,6 +16,9 @@ _FRAMES = flags.DEFINE_list("frames", ["1", "80", "120", "180"],
                             "Frames of the PNG grid (the paper's Figure 2).")
 _FORMAT = flags.DEFINE_enum("format", "gif", ["gif", "mp4"],
                             "Animation format (mp4 needs ffmpeg).")
+_COMPARE = flags.DEFINE_string(
+    "compare", None, "A second trajectory file (e.g. GNS predictions) drawn "
+    "beside --traj.")
 
 
 def main(argv):

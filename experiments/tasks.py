@@ -5,12 +5,15 @@ module, so that jobs compose (the demo runs several) and tests call them
 directly.
 """
 
+import dataclasses
 import os
 from typing import Sequence
 
+import numpy as np
 import tqdm
 
 import mpm
+from gnsjax import data
 from gnsjax import render
 from mpm import io as mpm_io
 
@@ -26,17 +29,31 @@ def simulate_to_file(scene: mpm.Scene, out: str, seed: int = -1,
   return result
 
 
+def _nth(path: str, index: int) -> mpm_io.Trajectory:
+  trajectories = list(mpm_io.read_trajectories(path))
+  if not 0 <= index < len(trajectories):
+    raise ValueError(f"index={index}: {path} holds {len(trajectories)} "
+                     f"trajectories; allowed: 0..{len(trajectories) - 1}")
+  return trajectories[index]
+
+
 def render_file(traj_path: str, out_dir: str, index: int = 0,
                 frames: Sequence[int] = (1, 80, 120, 180),
-                fmt: str = "gif") -> tuple[str, str]:
-  """Writes ``animation.<fmt>`` and ``frames.png`` for one trajectory."""
-  trajectories = list(mpm_io.read_trajectories(traj_path))
-  if not 0 <= index < len(trajectories):
-    raise ValueError(f"index={index}: the file holds {len(trajectories)} "
-                     f"trajectories; allowed: 0..{len(trajectories) - 1}")
-  t = trajectories[index]
+                fmt: str = "gif",
+                compare_path: str | None = None) -> tuple[str, str]:
+  """Writes ``animation.<fmt>`` and ``frames.png`` for one trajectory, beside
+  the same trajectory of ``compare_path`` if given (the paper's Fig. 2: MPM
+  left, GNS right)."""
+  t = _nth(traj_path, index)
   os.makedirs(out_dir, exist_ok=True)
   panels = [(f"MPM: {t.scene.name}", t.positions)]
+  if compare_path is not None:
+    other = _nth(compare_path, index)
+    if other.positions.shape != t.positions.shape:
+      raise ValueError(f"{compare_path}: trajectory {index} has shape "
+                       f"{other.positions.shape}, {traj_path} has "
+                       f"{t.positions.shape}")
+    panels.append(("GNS", other.positions))
   frames = [f for f in frames if f < len(t.positions)]
   anim = render.animate(panels, t.scene, t.boundary_positions, t.boundary_type,
                         os.path.join(out_dir, f"animation.{fmt}"))
@@ -44,6 +61,32 @@ def render_file(traj_path: str, out_dir: str, index: int = 0,
                            t.boundary_type, frames,
                            os.path.join(out_dir, "frames.png"))
   return anim, grid
+
+
+def rollout_to_files(workdir: str, data_dir: str, out_dir: str,
+                     split: str = "test",
+                     max_trajectories: int | None = None) -> dict[str, str]:
+  """Rolls out a split with a trained run; writes predicted and true files."""
+  from gnsjax import evaluate  # pylint: disable=g-import-not-at-top
+  os.makedirs(out_dir, exist_ok=True)
+  config, problem, trainer, state, _ = evaluate.load_run(workdir, data_dir)
+  c = config.train.input_frames
+  results = evaluate.rollout_split(trainer, state, problem,
+                                   data.split_path(data_dir, split), c,
+                                   max_trajectories)
+  paths = {"predicted": os.path.join(out_dir, "predicted.h5"),
+           "truth": os.path.join(out_dir, "truth.h5")}
+  stats = {k: v for k, v in mpm_io.read_header(
+      data.split_path(data_dir, split)).items() if k.endswith(("_mean",
+                                                               "_std"))}
+  predicted = [dataclasses.replace(
+      r["trajectory"], positions=np.concatenate(
+          [r["trajectory"].positions[:c], r["predicted"]]).astype(np.float32))
+               for r in results]
+  mpm_io.write_trajectories(paths["predicted"], predicted, stats=stats)
+  mpm_io.write_trajectories(paths["truth"], [r["trajectory"] for r in results],
+                            stats=stats)
+  return paths
 
 
 def demo_scene(num_frames: int = 600) -> mpm.Scene:

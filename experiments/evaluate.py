@@ -1,0 +1,36 @@
+"""The paper's evaluation of a trained run: figures, numbers, report.
+
+  python -m experiments.evaluate --workdir=RUN --data=DATA --out=DIR
+"""
+
+from absl import app
+from absl import flags
+
+from experiments import runtime
+from gnsjax import evaluate
+
+_WORKDIR = flags.DEFINE_string("workdir", None, "Training run directory.")
+_DATA = flags.DEFINE_string("data", None, "Dataset directory.")
+_OUT = flags.DEFINE_string("out", None, "Output directory.")
+_MAX = flags.DEFINE_integer("max_trajectories", None,
+                            "Evaluate only the first test trajectories.")
+_REPEATS = flags.DEFINE_integer("timing_repeats", 3,
+                                "Repeats of each Table 2 timing (median).")
+_CHECKPOINTS = flags.DEFINE_bool(
+    "checkpoint_errors", True, "Also evaluate the named checkpoints (Fig. 5).")
+
+
+def main(argv):
+  del argv
+  runtime.enable_compilation_cache()
+  summary = evaluate.evaluate(_WORKDIR.value, _DATA.value, _OUT.value,
+                              max_trajectories=_MAX.value,
+                              timing_repeats=_REPEATS.value,
+                              checkpoint_errors=_CHECKPOINTS.value)
+  print(f"test MSE {summary['test_mse']:.3e} m^2; report: "
+        f"{_OUT.value}/report.md")
+
+
+if __name__ == "__main__":
+  flags.mark_flags_as_required(["workdir", "data", "out"])
+  app.run(main)

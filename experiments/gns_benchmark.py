@@ -1,0 +1,1001 @@
+"""GNS benchmark: forward and training step, peers, FLOP rate, split layer.
+
+One library call, :func:`run_benchmark`, measures the learned simulator and
+writes what it measured (JSON and Markdown) to a directory:
+
+1. the forward step (features + model: one call that turns a window of
+   C = 6 input frames into normalised accelerations) and the training step
+   (forward + backward of ``gnsjax.simulator.loss``, gradient clipping and
+   Adam from ``gnsjax.train.create_optimizer``) of the paper model
+   (``configs/paper.py``) and the small model (``configs/small.py``), at batch
+   1, on two graphs:
+
+   * ``sand_block``: the shared window (``/work/shared/bench``), 1000 sand
+     particles, the graph public GNS implementations were timed on (24,930
+     directed edges at R = 0.015 m, self-pairs included; checked);
+   * ``paper_scene``: frames 50-56 of the paper scene (one semicircle)
+     simulated with ``mpm.simulate``, with all of its boundary (ramp and
+     obstacle) particles as static nodes, as a rollout assembles them
+     (``gnsjax.rollout.trajectory_nodes``), and statistics from its finite
+     differences.
+
+   The neighbour graph is computed before the clock starts (as geoelements/gns
+   and LagrangeBench were timed) and holds exactly the graph's edges, no
+   capacity padding; one more row times the paper model on the neighbour
+   list's padded capacity, as rollouts run it.
+2. peers, quoted from ``/work/shared/bench/README.md`` (not re-run):
+   geoelements/gns and LagrangeBench on the sand block; ours as a ratio.
+3. this machine's matmul rate in the same run (jitted 2048x2048 float32
+   matmuls, at the start and at the end) and the model's achieved FLOP rate
+   as a fraction of it;
+4. the split first edge layer against the concatenated form (same graph,
+   same function: the concatenated parameters are mapped from the split ones
+   with ``models.split_to_concat_params``), timed interleaved, with the FLOPs
+   of each (``models.processor_flops`` and XLA's cost analysis);
+5. the anatomy of one message-passing step: dense layers, gathers and
+   segment sums timed on their own at the same sizes, to tell what dominates.
+
+Timing rules (DESIGN.md, "Honest timing"): compilation (timed separately) and
+a warm-up call are excluded; every call is waited on with
+``jax.block_until_ready``; each figure is the median of repeats with the
+minimum beside it; comparisons within the run (split vs concatenated) are
+interleaved so that load from other processes falls on both.
+"""
+
+import dataclasses
+import datetime
+import functools
+import importlib
+import json
+import os
+import platform
+import statistics
+import tempfile
+import time
+from typing import Any, Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import mpm
+from gnsjax import features
+from gnsjax import graph
+from gnsjax import models
+from gnsjax import rollout as rollout_lib
+from gnsjax import simulator
+from gnsjax import train
+from mpm import io as mpm_io
+
+# The shared benchmark input (README.md there).
+SAND_BLOCK_DIR = "/work/shared/bench"
+SAND_BLOCK_NPZ = "sand_block_window.npz"
+SAND_BLOCK_METADATA = "sand_block_metadata.json"
+SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
+# The paper scene of the benchmark (as in experiments/mpm_benchmark.py).
+PAPER_SCENE = {"name": "paper_semicircle",
+               "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}]}
+INPUT_FRAMES = 6
+
+# Quoted from /work/shared/bench/README.md: measured on this machine's kind (2
+# CPU threads), latent 128, 10 message-passing steps, MLPs with two hidden
+# layers, batch 1, on the sand block window. Not re-run here.
+PEERS = {
+    "geoelements/gns": {"version": "PyTorch 2.13", "forward_s": 0.54,
+                        "train_step_s": 1.53},
+    "LagrangeBench": {"version": "0.2.0 (JAX 0.4.29)", "forward_s": 0.82,
+                      "train_step_s": 2.93},
+}
+REFERENCE_PEER = "geoelements/gns"
+# Targets: our time at most this fraction of the reference peer's; achieved
+# FLOP rate at least this fraction of the matmul rate; split layer at least
+# this much faster than the concatenated form.
+TARGET_PEER_RATIO = 0.7
+TARGET_MATMUL_FRACTION = 0.6
+TARGET_SPLIT_SPEEDUP = 1.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Sizes:
+  """What to measure, and how much.
+
+  Attributes:
+    models: configs (``experiments/configs/<name>.py``) timed on each scene.
+    split_model: config of the split-vs-concatenated comparison (and of the
+      padded-capacity row and the anatomy).
+    forward_repeats: timed forward calls per measurement.
+    train_repeats: timed training steps per measurement.
+    matmul_size: n of the n x n float32 matmul that sets the machine's rate.
+    matmul_repeats: timed matmuls (at the start, and again at the end).
+    scene_frames: frames simulated for the paper scene.
+    window_start: first frame of its window (C + 1 frames from there).
+    anatomy_repeats: timed calls of each part of a message-passing step.
+    padded_row: also time the split model's forward on the padded capacity.
+  """
+  models: tuple[str, ...] = ("paper", "small")
+  split_model: str = "paper"
+  forward_repeats: int = 7
+  train_repeats: int = 5
+  matmul_size: int = 2048
+  matmul_repeats: int = 10
+  scene_frames: int = 60
+  window_start: int = 50
+  anatomy_repeats: int = 10
+  padded_row: bool = True
+
+
+FULL = Sizes()
+# Tiny sizes that exercise every measurement in seconds (smoke tests): the
+# test config's model (latent 16, 2 steps), a short paper-scene simulation.
+QUICK = Sizes(models=("test",), split_model="test", forward_repeats=2,
+              train_repeats=2, matmul_size=256, matmul_repeats=2,
+              scene_frames=8, window_start=1, anatomy_repeats=2,
+              padded_row=True)
+
+
+# ---------------------------------------------------------------- timing ---
+
+
+def _summary(seconds: Sequence[float]) -> dict[str, Any]:
+  """Median and minimum of repeated timings (s)."""
+  return {"median_s": statistics.median(seconds), "min_s": min(seconds),
+          "repeats": len(seconds), "all_s": list(seconds)}
+
+
+def time_calls(calls: dict[str, Callable[[], Any]],
+               repeats: int) -> dict[str, dict[str, Any]]:
+  """Seconds per call of each zero-argument function, interleaved.
+
+  Each function is called once to warm up, then the functions take turns,
+  ``repeats`` rounds, so that load from other processes falls on all of them
+  alike. The clock stops after ``jax.block_until_ready`` of the result.
+  """
+  for call in calls.values():
+    jax.block_until_ready(call())
+  seconds = {name: [] for name in calls}
+  for _ in range(repeats):
+    for name, call in calls.items():
+      start = time.perf_counter()
+      jax.block_until_ready(call())
+      seconds[name].append(time.perf_counter() - start)
+  return {name: _summary(s) for name, s in seconds.items()}
+
+
+def _compile(fn, *args):
+  """(compiled executable, compile seconds, XLA flop count) of a jitted fn."""
+  start = time.perf_counter()
+  compiled = fn.lower(*args).compile()
+  compile_s = time.perf_counter() - start
+  cost = compiled.cost_analysis()
+  cost = cost[0] if isinstance(cost, (list, tuple)) else cost
+  flops = float(cost["flops"]) if cost and "flops" in cost else None
+  return compiled, compile_s, flops
+
+
+def measure_matmul(size: int, repeats: int) -> dict[str, Any]:
+  """GFLOP/s of a jitted float32 ``size x size`` matmul (2 n^3 FLOPs)."""
+  ka, kb = jax.random.split(jax.random.key(0))
+  a = jax.random.normal(ka, (size, size), jnp.float32)
+  b = jax.random.normal(kb, (size, size), jnp.float32)
+  compiled, _, _ = _compile(jax.jit(jnp.matmul), a, b)
+  t = time_calls({"matmul": lambda: compiled(a, b)}, repeats)["matmul"]
+  flops = 2.0 * size**3
+  rates = [flops / s / 1e9 for s in t["all_s"]]
+  return {"size": size, "flops": flops, "repeats": repeats,
+          "median_gflops": statistics.median(rates),
+          "max_gflops": max(rates), "gflops_all": rates,
+          "median_s": t["median_s"]}
+
+
+# ---------------------------------------------------------------- inputs ---
+
+
+@dataclasses.dataclass(frozen=True)
+class BenchGraph:
+  """One window and its radius graph.
+
+  Attributes:
+    name: scene name.
+    positions: float32 [C + 1, N, 2] (m): C inputs, then the target.
+    particle_type: int32 [N]; moving: bool [N].
+    stats: normalisation statistics; bounds: [2, 2] (m); radius: R (m).
+    senders, receivers: int32 [E], the graph's edges (no padding).
+    padded_senders, padded_receivers: int32 [capacity], the neighbour list's
+      edges with padding entries equal to N (as rollouts use them).
+    info: what to record about the scene.
+  """
+  name: str
+  positions: np.ndarray
+  particle_type: np.ndarray
+  moving: np.ndarray
+  stats: features.Stats
+  bounds: np.ndarray
+  radius: float
+  senders: np.ndarray
+  receivers: np.ndarray
+  padded_senders: np.ndarray
+  padded_receivers: np.ndarray
+  info: dict
+
+  @property
+  def n_nodes(self) -> int:
+    return int(self.positions.shape[1])
+
+  @property
+  def n_edges(self) -> int:
+    return int(self.senders.shape[0])
+
+  @property
+  def context(self) -> simulator.Context:
+    return simulator.Context(
+        features.Stats(*(jnp.asarray(s, jnp.float32) for s in self.stats)),
+        jnp.asarray(self.bounds, jnp.float32))
+
+
+def _radius_graph(last: np.ndarray, bounds: np.ndarray, radius: float):
+  """(senders, receivers) without and with padding, from ``gnsjax.graph``."""
+  spec = graph.GraphSpec(radius, tuple(map(tuple, np.asarray(
+      bounds, np.float64).tolist())))
+  n = last.shape[0]
+  nbrs = graph.allocate(spec, jnp.asarray(last))
+  if bool(nbrs.did_buffer_overflow):
+    raise RuntimeError("neighbour list overflowed at allocation")
+  senders, receivers = (np.asarray(a) for a in graph.edges(nbrs, n))
+  real = senders < n
+  return senders[real], receivers[real], senders, receivers
+
+
+def load_sand_block(directory: str = SAND_BLOCK_DIR) -> BenchGraph:
+  """The shared sand block window, its metadata and graph.
+
+  Raises:
+    FileNotFoundError: a missing input file (named).
+    RuntimeError: the graph does not have the 24,930 edges the peers had.
+  """
+  npz = os.path.join(directory, SAND_BLOCK_NPZ)
+  meta_path = os.path.join(directory, SAND_BLOCK_METADATA)
+  for path in (npz, meta_path):
+    if not os.path.exists(path):
+      raise FileNotFoundError(f"{path}: missing benchmark input (the shared "
+                              "sand block window; see --sand_block_dir)")
+  with np.load(npz) as d:
+    positions = np.asarray(d["positions"], np.float32)
+    types = np.asarray(d["particle_type"], np.int32)
+  with open(meta_path) as f:
+    meta = json.load(f)
+  if positions.shape[0] != INPUT_FRAMES + 1:
+    raise ValueError(f"{npz}: positions {positions.shape}; want "
+                     f"[{INPUT_FRAMES + 1}, N, 2]")
+  radius = float(meta["default_connectivity_radius"])
+  bounds = np.asarray(meta["bounds"], np.float32)
+  stats = features.Stats(*(np.asarray(meta[k], np.float32) for k in
+                           ("vel_mean", "vel_std", "acc_mean", "acc_std")))
+  senders, receivers, ps, pr = _radius_graph(positions[INPUT_FRAMES - 1],
+                                             bounds, radius)
+  if len(senders) != SAND_BLOCK_EDGES:
+    raise RuntimeError(
+        f"sand block graph at R = {radius}: {len(senders)} edges, want "
+        f"{SAND_BLOCK_EDGES} (the graph the peers were timed on)")
+  moving = ~np.isin(types, mpm.KINEMATIC_TYPES)
+  return BenchGraph(
+      "sand_block", positions, types, moving, stats, bounds, radius, senders,
+      receivers, ps, pr,
+      {"source": npz, "n_particles": int(positions.shape[1]),
+       "n_moving": int(moving.sum()), "n_boundary": 0,
+       "edges_checked": SAND_BLOCK_EDGES})
+
+
+def make_paper_scene(sizes: Sizes, radius: float = 0.015) -> BenchGraph:
+  """Frames ``window_start``.. of the simulated paper scene, with all of its
+  boundary particles as static nodes (``rollout.trajectory_nodes``)."""
+  scene = mpm.Scene.from_dict({**PAPER_SCENE,
+                               "num_frames": sizes.scene_frames})
+  result = mpm.simulate(scene)
+  t0 = sizes.window_start
+  window = result.positions[t0:t0 + INPUT_FRAMES + 1]
+  if window.shape[0] != INPUT_FRAMES + 1:
+    raise ValueError(f"paper scene: {sizes.scene_frames} frames hold no "
+                     f"window of {INPUT_FRAMES + 1} from frame {t0}")
+  traj = mpm_io.Trajectory.from_result(result)
+  traj = dataclasses.replace(traj, positions=window)
+  positions, types, moving = rollout_lib.trajectory_nodes(
+      traj, INPUT_FRAMES + 1)
+  fd = mpm_io.finite_difference_stats([result.positions])
+  stats = features.Stats(*(np.asarray(fd[k], np.float32) for k in
+                           features.Stats._fields))
+  bounds = np.array([[0.0, scene.domain.width], [0.0, scene.domain.height]],
+                    np.float32)
+  senders, receivers, ps, pr = _radius_graph(positions[INPUT_FRAMES - 1],
+                                             bounds, radius)
+  n_sand = int(result.positions.shape[1])
+  return BenchGraph(
+      "paper_scene", positions.astype(np.float32), types, moving, stats,
+      bounds, radius, senders, receivers, ps, pr,
+      {"scene": scene.to_dict(),
+       "frames": [t0, t0 + INPUT_FRAMES], "n_particles": n_sand,
+       "n_moving": int(moving.sum()),
+       "n_boundary": int(positions.shape[1]) - n_sand,
+       "stats": "finite differences of the simulated trajectory "
+                f"({sizes.scene_frames} frames)"})
+
+
+# ------------------------------------------------------------ the model ---
+
+
+def load_config(name: str):
+  return importlib.import_module(f"experiments.configs.{name}").get_config()
+
+
+def _mlp_flops(rows: int, sizes: Sequence[int]) -> int:
+  """2 x multiply-adds of dense layers sizes[0] -> sizes[1] -> ... on rows."""
+  return 2 * rows * sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
+
+
+def dense_flops(model: models.EncodeProcessDecode, n_nodes: int,
+                n_edges: int, node_features: int) -> dict[str, int]:
+  """FLOPs of the model's dense layers: ``models.processor_flops`` plus the
+  encoders and the decoder (2 per multiply-add)."""
+  l, hl = model.latent_size, model.hidden_layers
+  hidden = [l] * hl
+  enc = (_mlp_flops(n_nodes, [node_features + model.type_embedding_size]
+                    + hidden + [l]) +
+         _mlp_flops(n_edges, [3] + hidden + [l]))
+  dec = _mlp_flops(n_nodes, [l] + hidden + [model.output_size])
+  proc = models.processor_flops(n_nodes, n_edges, l, hl,
+                                model.num_message_passing_steps,
+                                model.split_first_layer)
+  return {"processor": proc, "encoders": enc, "decoder": dec,
+          "total": proc + enc + dec}
+
+
+def _node_feature_size() -> int:
+  return 2 * (INPUT_FRAMES - 1) + 4
+
+
+def init_params(model: models.EncodeProcessDecode, seed: int = 0):
+  n, e = 8, 8
+  return model.init(jax.random.key(seed),
+                    jnp.zeros((n, _node_feature_size())),
+                    jnp.zeros((n,), jnp.int32), jnp.zeros((e, 3)),
+                    jnp.zeros((e,), jnp.int32), jnp.zeros((e,), jnp.int32))
+
+
+def concat_params(params):
+  """The concatenated-form parameters computing the same function."""
+  mapped = dict(params["params"])
+  for name in mapped:
+    if name.startswith("step_"):
+      mapped[name] = models.split_to_concat_params(mapped[name])
+  return {"params": mapped}
+
+
+def forward_fn(model, radius: float):
+  """jit of ``simulator.predict``: (params, inputs, types, senders,
+  receivers, context) -> normalised accelerations [N, 2]."""
+  def fn(params, inputs, particle_type, senders, receivers, context):
+    return simulator.predict(model, params, inputs, particle_type, senders,
+                             receivers, context, radius)
+  return jax.jit(fn)
+
+
+def train_step_fn(model, tx, radius: float):
+  """jit of one training step at batch 1 (``train.Trainer``'s, unbatched):
+  loss and gradients of ``simulator.loss``, clipping and Adam (``tx``)."""
+  def step(state, inputs, target, particle_type, moving, senders, receivers,
+           context):
+    def loss_fn(params):
+      return simulator.loss(model, params, inputs, target, particle_type,
+                            moving, senders, receivers, context, radius)
+    loss, grads = jax.value_and_grad(loss_fn)(state.params)
+    updates, opt_state = tx.update(grads, state.opt_state, state.params)
+    params = jax.tree.map(lambda p, u: p + u, state.params, updates)
+    return state.replace(step=state.step + 1, params=params,
+                         opt_state=opt_state), loss
+  return jax.jit(step, donate_argnums=0)
+
+
+class _Runner:
+  """Compiled forward and training step of one model on one graph."""
+
+  def __init__(self, config, g: BenchGraph, params=None, padded=False):
+    self.model = train.create_model(config.model)
+    self.tx = train.create_optimizer(config.train)
+    self.params = init_params(self.model) if params is None else params
+    s, r = ((g.padded_senders, g.padded_receivers) if padded
+            else (g.senders, g.receivers))
+    self.graph = g
+    self.fwd_args = (self.params, jnp.asarray(g.positions[:INPUT_FRAMES]),
+                     jnp.asarray(g.particle_type), jnp.asarray(s),
+                     jnp.asarray(r), g.context)
+    self.n_edges_computed = int(s.shape[0])
+
+  def compile_forward(self):
+    self.fwd, self.fwd_compile_s, self.fwd_xla_flops = _compile(
+        forward_fn(self.model, self.graph.radius), *self.fwd_args)
+
+  def forward(self):
+    return self.fwd(*self.fwd_args)
+
+  def compile_train(self):
+    g = self.graph
+    _, inputs, types, s, r, ctx = self.fwd_args
+    self.train_args = (inputs, jnp.asarray(g.positions[INPUT_FRAMES]), types,
+                       jnp.asarray(g.moving), s, r, ctx)
+    self.state = self._fresh_state()
+    self.step, self.train_compile_s, self.train_xla_flops = _compile(
+        train_step_fn(self.model, self.tx, g.radius), self.state,
+        *self.train_args)
+
+  def _fresh_state(self):
+    params = jax.tree.map(jnp.array, self.params)  # a copy: state is donated
+    return train.TrainState(jnp.zeros((), jnp.int32), params,
+                            self.tx.init(params), jax.random.key(0))
+
+  def train_step(self):
+    self.state, loss = self.step(self.state, *self.train_args)
+    return loss
+
+  def dense_flops(self):
+    return dense_flops(self.model, self.graph.n_nodes, self.n_edges_computed,
+                       _node_feature_size())
+
+
+def _rate(flops, seconds):
+  return None if flops is None else flops / seconds / 1e9
+
+
+def _fraction(gflops, matmul):
+  return None if gflops is None else gflops / matmul
+
+
+def _row_flops(row: dict, runner: _Runner) -> None:
+  fwd_s = row["forward"]["median_s"]
+  dense = runner.dense_flops()
+  row["flops"] = {"forward_dense": dense, "forward_xla": runner.fwd_xla_flops}
+  row["forward_gflops_dense"] = _rate(dense["total"], fwd_s)
+  row["forward_gflops_xla"] = _rate(runner.fwd_xla_flops, fwd_s)
+  if "train_step" in row:
+    row["flops"]["train_xla"] = runner.train_xla_flops
+    row["train_gflops_xla"] = _rate(runner.train_xla_flops,
+                                    row["train_step"]["median_s"])
+
+
+def add_matmul_fractions(results: dict, matmul: float) -> None:
+  """Achieved GFLOP/s as fractions of the run's matmul rate (item 3)."""
+  for row in results["steps"]:
+    for key in ("forward_gflops_dense", "forward_gflops_xla",
+                "train_gflops_xla"):
+      if key in row:
+        row[key.replace("gflops", "matmul_fraction")] = _fraction(
+            row[key], matmul)
+  for key in ("split", "concat"):
+    v = results["split"][key]
+    v["forward_matmul_fraction_dense"] = _fraction(v["forward_gflops_dense"],
+                                                   matmul)
+
+
+def _model_info(name: str, config) -> dict[str, Any]:
+  m = config.model
+  return {"config": name, "latent_size": m.latent_size,
+          "hidden_layers": m.hidden_layers,
+          "num_message_passing_steps": m.num_message_passing_steps,
+          "type_embedding_size": m.type_embedding_size,
+          "split_first_layer": m.split_first_layer}
+
+
+def measure_model(name: str, g: BenchGraph, sizes: Sizes,
+                  log: Callable[[str], None], *, train_step: bool = True,
+                  padded: bool = False) -> dict[str, Any]:
+  """Item 1: forward (and training) step of one model on one graph."""
+  config = load_config(name)
+  runner = _Runner(config, g, padded=padded)
+  runner.compile_forward()
+  row = {"model": _model_info(name, config), "scene": g.name,
+         "n_nodes": g.n_nodes, "n_edges": g.n_edges,
+         "n_edges_computed": runner.n_edges_computed, "padded": padded,
+         "n_params": int(sum(x.size for x in jax.tree.leaves(runner.params))),
+         "compile_s": {"forward": runner.fwd_compile_s}}
+  row["forward"] = time_calls({"f": runner.forward},
+                              sizes.forward_repeats)["f"]
+  label = (f"{name} model on {g.name} ({g.n_nodes} nodes, "
+           f"{runner.n_edges_computed} edges"
+           + (", padded capacity" if padded else "") + ")")
+  log(f"{label}: forward step {row['forward']['median_s']:.3f} s (features "
+      f"+ model, graph precomputed; median of {sizes.forward_repeats}, min "
+      f"{row['forward']['min_s']:.3f}; compile {runner.fwd_compile_s:.1f} s "
+      "excluded)")
+  if train_step:
+    runner.compile_train()
+    row["compile_s"]["train_step"] = runner.train_compile_s
+    row["train_step"] = time_calls({"t": runner.train_step},
+                                   sizes.train_repeats)["t"]
+    row["train_over_forward"] = (row["train_step"]["median_s"] /
+                                 row["forward"]["median_s"])
+    log(f"{label}: training step {row['train_step']['median_s']:.3f} s "
+        "(loss + grad + clip + Adam; median of "
+        f"{sizes.train_repeats}, min {row['train_step']['min_s']:.3f}; "
+        f"compile {runner.train_compile_s:.1f} s excluded)")
+  _row_flops(row, runner)
+  log(f"{label}: {row['flops']['forward_dense']['total'] / 1e9:.2f} GFLOP "
+      "in dense layers per forward (XLA counts "
+      f"{_gflop(runner.fwd_xla_flops)}) -> "
+      f"{row['forward_gflops_dense']:.1f} GFLOP/s achieved")
+  return row
+
+
+def compare_peers(row: dict) -> dict[str, Any]:
+  """Item 2: our paper-model times on the sand block against the quoted
+  peers' (ratio < 1: we are faster)."""
+  out = {"quoted_from": os.path.join(SAND_BLOCK_DIR, "README.md"),
+         "note": "peer times quoted, not re-run; measured earlier on this "
+                 "machine's kind with 2 CPU threads",
+         "target_ratio_to_reference": TARGET_PEER_RATIO,
+         "reference": REFERENCE_PEER, "peers": {}}
+  for peer, p in PEERS.items():
+    out["peers"][peer] = {
+        **p,
+        "forward_ratio": row["forward"]["median_s"] / p["forward_s"],
+        "train_step_ratio": row["train_step"]["median_s"] / p["train_step_s"],
+        "forward_ratio_min": row["forward"]["min_s"] / p["forward_s"],
+        "train_step_ratio_min": (row["train_step"]["min_s"] /
+                                 p["train_step_s"])}
+  ref = out["peers"][REFERENCE_PEER]
+  out["forward_target_met"] = ref["forward_ratio"] <= TARGET_PEER_RATIO
+  out["train_step_target_met"] = ref["train_step_ratio"] <= TARGET_PEER_RATIO
+  return out
+
+
+def measure_split(name: str, g: BenchGraph, sizes: Sizes,
+                  log: Callable[[str], None]) -> dict[str, Any]:
+  """Item 4: split first edge layer vs the concatenated form, interleaved."""
+  config = load_config(name)
+  split_cfg = load_config(name)
+  split_cfg.model.split_first_layer = True
+  concat_cfg = load_config(name)
+  concat_cfg.model.split_first_layer = False
+  split = _Runner(split_cfg, g)
+  concat = _Runner(concat_cfg, g, params=concat_params(split.params))
+  for r in (split, concat):
+    r.compile_forward()
+    r.compile_train()
+  diff = float(jnp.max(jnp.abs(split.forward() - concat.forward())))
+  out = {"model": _model_info(name, config), "scene": g.name,
+         "n_nodes": g.n_nodes, "n_edges": g.n_edges,
+         "max_abs_output_diff": diff}
+  fwd = time_calls({"split": split.forward, "concat": concat.forward},
+                   sizes.forward_repeats)
+  trn = time_calls({"split": split.train_step, "concat": concat.train_step},
+                   sizes.train_repeats)
+  for key, runner in (("split", split), ("concat", concat)):
+    dense = runner.dense_flops()
+    out[key] = {"forward": fwd[key], "train_step": trn[key],
+                "processor_flops": dense["processor"],
+                "dense_flops": dense["total"],
+                "xla_forward_flops": runner.fwd_xla_flops,
+                "xla_train_flops": runner.train_xla_flops,
+                "forward_gflops_dense": _rate(dense["total"],
+                                              fwd[key]["median_s"]),
+                "compile_s": {"forward": runner.fwd_compile_s,
+                              "train_step": runner.train_compile_s}}
+  out["forward_speedup"] = (fwd["concat"]["median_s"] /
+                            fwd["split"]["median_s"])
+  out["train_step_speedup"] = (trn["concat"]["median_s"] /
+                               trn["split"]["median_s"])
+  out["processor_flops_ratio"] = (out["concat"]["processor_flops"] /
+                                  out["split"]["processor_flops"])
+  if out["split"]["xla_forward_flops"] and out["concat"]["xla_forward_flops"]:
+    out["xla_forward_flops_saved"] = (out["concat"]["xla_forward_flops"] -
+                                      out["split"]["xla_forward_flops"])
+    out["xla_forward_flops_ratio"] = (out["concat"]["xla_forward_flops"] /
+                                      out["split"]["xla_forward_flops"])
+  out["processor_flops_saved"] = (out["concat"]["processor_flops"] -
+                                  out["split"]["processor_flops"])
+  out["target_speedup"] = TARGET_SPLIT_SPEEDUP
+  out["forward_target_met"] = out["forward_speedup"] >= TARGET_SPLIT_SPEEDUP
+  out["train_step_target_met"] = (out["train_step_speedup"] >=
+                                  TARGET_SPLIT_SPEEDUP)
+  log(f"split vs concatenated first edge layer ({name} model on {g.name}, "
+      f"interleaved; outputs agree to {diff:.2g}): forward "
+      f"{fwd['split']['median_s']:.3f} s vs {fwd['concat']['median_s']:.3f} s"
+      f" ({out['forward_speedup']:.2f}x), training step "
+      f"{trn['split']['median_s']:.3f} s vs {trn['concat']['median_s']:.3f} s"
+      f" ({out['train_step_speedup']:.2f}x); processor FLOPs "
+      f"{out['split']['processor_flops'] / 1e9:.2f} G vs "
+      f"{out['concat']['processor_flops'] / 1e9:.2f} G "
+      f"({out['processor_flops_ratio']:.2f}x); XLA forward FLOPs "
+      f"{_gflop(out['split']['xla_forward_flops'])} G vs "
+      f"{_gflop(out['concat']['xla_forward_flops'])} G")
+  return out
+
+
+# -------------------------------------------------------------- anatomy ---
+
+
+def _layer_norm(x):
+  mean = jnp.mean(x, -1, keepdims=True)
+  var = jnp.mean((x - mean)**2, -1, keepdims=True)
+  return (x - mean) * jax.lax.rsqrt(var + 1e-6)
+
+
+def measure_anatomy(name: str, g: BenchGraph, sizes: Sizes,
+                    forward_s: float | None, log: Callable[[str], None]
+                    ) -> dict[str, Any]:
+  """Item 5: the parts of one message-passing step, timed on their own.
+
+  Stand-ins with the model's shapes (split form): the edge MLP's dense
+  layers on [E, L] (first layer as W_e e + s + r), the two [N, L] -> [E, L]
+  gathers, the [E, L] -> [N, L] segment sum of messages at the receivers (as
+  jraph calls it, and told that the receivers are sorted), the node side
+  (two projections and the node MLP), and, for training, the gathers'
+  transpose (a scatter-add into the nodes).
+  """
+  config = load_config(name)
+  l, hl = config.model.latent_size, config.model.hidden_layers
+  steps = config.model.num_message_passing_steps
+  n, e = g.n_nodes, g.n_edges
+  senders, receivers = jnp.asarray(g.senders), jnp.asarray(g.receivers)
+  sorted_receivers = bool(np.all(np.diff(g.receivers) >= 0))
+  keys = jax.random.split(jax.random.key(1), 8)
+  h = jax.random.normal(keys[0], (n, l))
+  edges = jax.random.normal(keys[1], (e, l))
+  w = [jax.random.normal(k, (l, l)) / np.sqrt(l) for k in keys[2:5]]
+  b = jnp.zeros((1, l))
+  w_node = jax.random.normal(keys[5], (2 * l, l)) / np.sqrt(2 * l)
+
+  def mlp(x, first):
+    x = jax.nn.relu(first + b)
+    for k in range(hl):
+      x = x @ w[min(k + 1, 2)] + b
+      if k < hl - 1:
+        x = jax.nn.relu(x)
+    return _layer_norm(x)
+
+  def edge_dense(e_, gs, gr):
+    return e_ + mlp(e_, e_ @ w[0] + gs + gr)
+
+  def gathers(hs, hr):
+    return hs[senders], hr[receivers]
+
+  def segment_sum(x):
+    return jax.ops.segment_sum(x, receivers, n)
+
+  def segment_sum_sorted(x):
+    return jax.ops.segment_sum(x, receivers, n, indices_are_sorted=True)
+
+  def node_side(h_, agg):
+    proj = h_ @ w[1], h_ @ w[2]
+    x = jnp.concatenate([h_, agg], -1) @ w_node
+    return h_ + mlp(h_, x), proj
+
+  def gathers_transpose(cs, cr):
+    return jax.vjp(gathers, h, h)[1]((cs, cr))
+
+  parts = {
+      "edge_dense": (edge_dense, (edges, edges, edges),
+                     _mlp_flops(e, [l] * (hl + 2)) + 0),
+      "gathers": (gathers, (h, h), 0),
+      "segment_sum": (segment_sum, (edges,), 0),
+      "segment_sum_sorted": (segment_sum_sorted, (edges,), 0),
+      "node_side": (node_side, (h, h),
+                    _mlp_flops(n, [2 * l] + [l] * (hl + 1)) +
+                    2 * _mlp_flops(n, [l, l])),
+      "gathers_transpose": (gathers_transpose, (edges, edges), 0),
+  }
+  compiled = {}
+  for key, (fn, args, _) in parts.items():
+    c, _, _ = _compile(jax.jit(fn), *args)
+    compiled[key] = functools.partial(c, *args)
+  times = time_calls(compiled, sizes.anatomy_repeats)
+  out = {"model": name, "scene": g.name, "n_nodes": n, "n_edges": e,
+         "latent_size": l, "steps": steps,
+         "receivers_sorted": sorted_receivers, "parts": {}}
+  forward_parts = ("edge_dense", "gathers", "segment_sum", "node_side")
+  per_step = sum(times[k]["median_s"] for k in forward_parts)
+  out["forward_parts_per_step_s"] = per_step
+  out["forward_parts_x_steps_s"] = per_step * steps
+  out["measured_forward_s"] = forward_s
+  for key, (_, _, flops) in parts.items():
+    t = times[key]
+    out["parts"][key] = {
+        **t, "ms": t["median_s"] * 1e3,
+        "x_steps_s": t["median_s"] * steps,
+        "share_of_forward": (t["median_s"] * steps / forward_s
+                             if forward_s else None),
+        "flops": flops or None,
+        "gflops": flops / t["median_s"] / 1e9 if flops else None}
+    log(f"anatomy ({name} on {g.name}, one step of {steps}): {key} "
+        f"{t['median_s'] * 1e3:.2f} ms (median of {sizes.anatomy_repeats}"
+        + (f"; {flops / t['median_s'] / 1e9:.1f} GFLOP/s" if flops else "")
+        + ")")
+  log(f"anatomy: forward parts x {steps} steps = "
+      f"{out['forward_parts_x_steps_s']:.3f} s"
+      + (f" of the measured {forward_s:.3f} s forward" if forward_s else ""))
+  return out
+
+
+# ---------------------------------------------------------------- output ---
+
+
+def _environment(quick: bool) -> dict[str, Any]:
+  return {
+      "date": datetime.datetime.now(datetime.timezone.utc).isoformat(
+          timespec="seconds"),
+      "quick": quick,
+      "python": platform.python_version(),
+      "machine": platform.machine(), "platform": platform.platform(),
+      "cpu_count": os.cpu_count(),
+      "jax_version": jax.__version__,
+      "jax_backend": jax.default_backend(),
+      "jax_devices": [str(d) for d in jax.devices()],
+      "xla_flags": os.environ.get("XLA_FLAGS", ""),
+      "load_average_start": list(os.getloadavg()),
+  }
+
+
+def _fmt(v, spec=".3f", none="n/a"):
+  return none if v is None else format(v, spec)
+
+
+def _gflop(flops):
+  return "-" if flops is None else f"{flops / 1e9:.2f}"
+
+
+def _pct(v):
+  return "n/a" if v is None else f"{100 * v:.0f}%"
+
+
+def _met(ok: bool) -> str:
+  return "met" if ok else "**MISSED**"
+
+
+def to_markdown(results: dict[str, Any]) -> str:
+  """The results as Markdown tables."""
+  env = results["environment"]
+  mm = results["matmul"]
+  lines = [
+      "# GNS benchmark", "",
+      f"{env['date']}, {env['platform']}, {env['cpu_count']} CPU cores, "
+      f"jax {env['jax_version']} ({env['jax_backend']}). Load average at "
+      f"start {env['load_average_start'][0]:.2f}, at end "
+      f"{env['load_average_end'][0]:.2f} (other processes share the cores: "
+      "absolute times and the peer ratios move with the load)."
+      + (" **Quick mode (tiny sizes): not representative.**"
+         if env["quick"] else ""), "",
+      "Medians of repeats (minimum in brackets); compilation and a warm-up "
+      "call excluded; `jax.block_until_ready` before the clock stops. "
+      "Forward step: one jitted call of `gnsjax.simulator.predict` (features "
+      "+ model) on a window of 6 frames; the radius graph is computed "
+      "before the clock starts and holds exactly the graph's edges. "
+      "Training step: `simulator.loss`, its gradient, clipping and Adam "
+      "(`train.create_optimizer`), batch 1, state donated; no noise. "
+      "GFLOP/s: the dense layers' FLOPs (`models.processor_flops` + "
+      "encoders + decoder) per second.", "",
+      f"Matmul rate of this machine in this run: "
+      f"**{mm['median_gflops']:.1f} GFLOP/s** (median of jitted "
+      f"{mm['size']}x{mm['size']} float32 matmuls; "
+      f"{mm['start']['median_gflops']:.1f} at the start, "
+      f"{mm['end']['median_gflops']:.1f} at the end).", "",
+      "## Forward and training step", "",
+      "| model | scene | nodes | edges | forward s | training step s | "
+      "train/forward | forward GFLOP/s | of matmul rate |",
+      "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+  for r in results["steps"]:
+    m = r["model"]
+    name = (f"{m['config']} (L={m['latent_size']}, M="
+            f"{m['num_message_passing_steps']})")
+    edges = str(r["n_edges"]) + (
+        f" (padded to {r['n_edges_computed']})" if r["padded"] else "")
+    train_s = (f"{r['train_step']['median_s']:.3f} "
+               f"({r['train_step']['min_s']:.3f})" if "train_step" in r
+               else "-")
+    lines.append(
+        f"| {name} | {r['scene']} | {r['n_nodes']} | {edges} | "
+        f"{r['forward']['median_s']:.3f} ({r['forward']['min_s']:.3f}) | "
+        f"{train_s} | {_fmt(r.get('train_over_forward'), '.2f', '-')} | "
+        f"{_fmt(r['forward_gflops_dense'], '.1f')} | "
+        f"{_pct(r['forward_matmul_fraction_dense'])} |")
+  lines += ["", f"Target: forward at least {_pct(TARGET_MATMUL_FRACTION)} "
+            "of the matmul rate. FLOPs per forward (dense layers / XLA "
+            "cost analysis of the jitted forward / XLA of the training "
+            "step), GFLOP:", ""]
+  for r in results["steps"]:
+    f = r["flops"]
+    lines.append(
+        f"- {r['model']['config']} on {r['scene']}"
+        + (" (padded)" if r["padded"] else "") +
+        f": {f['forward_dense']['total'] / 1e9:.2f} "
+        f"(processor {f['forward_dense']['processor'] / 1e9:.2f}) / "
+        f"{_gflop(f['forward_xla'])} / {_gflop(f.get('train_xla'))}")
+  lines.append("")
+
+  p = results.get("peers")
+  if p:
+    lines += [
+        "## Against public GNS implementations (paper model, sand block, "
+        "batch 1)", "",
+        f"Peer times quoted from `{p['quoted_from']}` ({p['note']}), not "
+        "re-run. Ratio = ours / theirs (below 1: we are faster). "
+        f"Target: at most {TARGET_PEER_RATIO}x {p['reference']}.", "",
+        "| implementation | forward s | training step s | our forward / "
+        "theirs | our training step / theirs |",
+        "| --- | ---: | ---: | ---: | ---: |",
+        f"| gnsjax (this run) | {p['ours']['forward_s']:.3f} | "
+        f"{p['ours']['train_step_s']:.3f} | 1 | 1 |"]
+    for name, q in p["peers"].items():
+      lines.append(f"| {name} ({q['version']}) | {q['forward_s']:.2f} | "
+                   f"{q['train_step_s']:.2f} | {q['forward_ratio']:.2f} "
+                   f"(min {q['forward_ratio_min']:.2f}) | "
+                   f"{q['train_step_ratio']:.2f} (min "
+                   f"{q['train_step_ratio_min']:.2f}) |")
+    lines += ["", f"Forward target: {_met(p['forward_target_met'])}; "
+              f"training-step target: {_met(p['train_step_target_met'])}.",
+              ""]
+  else:
+    lines += ["## Against public GNS implementations", "",
+              "Not compared: the paper model was not timed in this run "
+              "(quick mode).", ""]
+
+  s = results["split"]
+  lines += [
+      f"## Split first edge layer vs concatenated ({s['model']['config']} "
+      f"model, {s['scene']}, {s['n_nodes']} nodes, {s['n_edges']} edges)",
+      "",
+      "Same function (concatenated parameters mapped from the split ones; "
+      f"outputs agree to {s['max_abs_output_diff']:.2g}), timed "
+      "interleaved.", "",
+      "| form | forward s | training step s | processor GFLOP | XLA forward "
+      "GFLOP | XLA training GFLOP | forward GFLOP/s |",
+      "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+  for key, label in (("split", "split (W_e e + (W_s h)[s] + (W_r h)[r])"),
+                     ("concat", "concatenated ([e, h_s, h_r] W)")):
+    v = s[key]
+    lines.append(
+        f"| {label} | {v['forward']['median_s']:.3f} "
+        f"({v['forward']['min_s']:.3f}) | {v['train_step']['median_s']:.3f} "
+        f"({v['train_step']['min_s']:.3f}) | "
+        f"{v['processor_flops'] / 1e9:.2f} | "
+        f"{_gflop(v['xla_forward_flops'])} | "
+        f"{_gflop(v['xla_train_flops'])} | "
+        f"{_fmt(v['forward_gflops_dense'], '.1f')} |")
+  lines += ["", f"Speedup of the split form: forward "
+            f"**{s['forward_speedup']:.2f}x** "
+            f"({_met(s['forward_target_met'])}), training step "
+            f"**{s['train_step_speedup']:.2f}x** "
+            f"({_met(s['train_step_target_met'])}); target "
+            f"{TARGET_SPLIT_SPEEDUP}x. FLOPs saved per forward: processor "
+            f"{s['processor_flops_saved'] / 1e9:.2f} G "
+            f"({s['processor_flops_ratio']:.2f}x fewer)"
+            + (f", XLA {s['xla_forward_flops_saved'] / 1e9:.2f} G "
+               f"({s['xla_forward_flops_ratio']:.2f}x fewer)"
+               if "xla_forward_flops_saved" in s else "") + ".", ""]
+
+  a = results["anatomy"]
+  lines += [
+      f"## Anatomy of one message-passing step ({a['model']} model, "
+      f"{a['scene']}: {a['n_nodes']} nodes, {a['n_edges']} edges, L = "
+      f"{a['latent_size']})", "",
+      "Each part jitted and timed on its own with the model's shapes "
+      f"(x {a['steps']} steps = the processor's share); receivers sorted: "
+      f"{a['receivers_sorted']}.", "",
+      "| part | ms per step | x steps (s) | of the forward | GFLOP/s |",
+      "| --- | ---: | ---: | ---: | ---: |"]
+  labels = {
+      "edge_dense": "edge MLP dense layers + LayerNorm [E, L]",
+      "gathers": "gathers (W_s h)[senders], (W_r h)[receivers]",
+      "segment_sum": "segment_sum of messages at receivers (as jraph)",
+      "segment_sum_sorted": "same, indices_are_sorted=True",
+      "node_side": "node projections + node MLP [N, 2L]",
+      "gathers_transpose": "gathers' transpose (backward: scatter-add)"}
+  for key, v in a["parts"].items():
+    lines.append(f"| {labels[key]} | {v['ms']:.2f} | {v['x_steps_s']:.3f} | "
+                 f"{_pct(v['share_of_forward'])} | "
+                 f"{_fmt(v['gflops'], '.1f', '-')} |")
+  lines += ["", f"Forward parts (first four rows) x {a['steps']} steps: "
+            f"{a['forward_parts_x_steps_s']:.3f} s; measured forward "
+            f"{_fmt(a['measured_forward_s'])} s.", ""]
+  return "\n".join(lines)
+
+
+def _write_atomic(path: str, text: str) -> None:
+  directory = os.path.dirname(os.path.abspath(path))
+  with tempfile.NamedTemporaryFile("w", dir=directory, delete=False,
+                                   suffix=".tmp") as f:
+    f.write(text)
+    tmp = f.name
+  os.replace(tmp, path)
+
+
+def _json_default(v):
+  if isinstance(v, (np.floating, np.integer, np.bool_)):
+    return v.item()
+  if isinstance(v, np.ndarray):
+    return v.tolist()
+  raise TypeError(f"not JSON serialisable: {type(v)}")
+
+
+def run_benchmark(out_dir: str, quick: bool = False,
+                  log: Callable[[str], None] = print,
+                  sand_block_dir: str = SAND_BLOCK_DIR) -> dict[str, Any]:
+  """Runs every measurement and writes ``gns_benchmark[_quick].{json,md}``.
+
+  Args:
+    out_dir: directory for the results (created if missing).
+    quick: tiny sizes (``QUICK``), seconds instead of minutes.
+    log: called with one line per measurement.
+    sand_block_dir: directory of the shared sand block window.
+
+  Returns:
+    The results (the JSON's content) with the Markdown under "markdown".
+  """
+  sizes = QUICK if quick else FULL
+  results: dict[str, Any] = {"environment": _environment(quick),
+                             "sizes": dataclasses.asdict(sizes)}
+  start = measure_matmul(sizes.matmul_size, sizes.matmul_repeats)
+  log(f"matmul rate (start): {start['median_gflops']:.1f} GFLOP/s (median of "
+      f"{sizes.matmul_repeats} jitted {sizes.matmul_size}^2 float32 "
+      "matmuls)")
+  sand = load_sand_block(sand_block_dir)
+  log(f"sand block: {sand.n_nodes} particles, {sand.n_edges} edges at R = "
+      f"{sand.radius} (checked: {SAND_BLOCK_EDGES})")
+  scene = make_paper_scene(sizes)
+  log(f"paper scene: frames {scene.info['frames'][0]}-"
+      f"{scene.info['frames'][1]}, {scene.info['n_particles']} sand + "
+      f"{scene.info['n_boundary']} boundary nodes, {scene.n_edges} edges")
+  results["scenes"] = {g.name: {**g.info, "n_nodes": g.n_nodes,
+                                "n_edges": g.n_edges,
+                                "edge_capacity": int(len(g.padded_senders)),
+                                "radius": g.radius,
+                                "bounds": g.bounds.tolist()}
+                       for g in (sand, scene)}
+  steps = []
+  for name in sizes.models:
+    for g in (sand, scene):
+      steps.append(measure_model(name, g, sizes, log))
+  if sizes.padded_row:
+    steps.append(measure_model(sizes.split_model, sand, sizes, log,
+                               train_step=False, padded=True))
+  results["steps"] = steps
+  paper_rows = [r for r in steps if r["model"]["config"] == "paper" and
+                r["scene"] == "sand_block" and not r["padded"]]
+  if paper_rows:
+    row = paper_rows[0]
+    results["peers"] = compare_peers(row)
+    results["peers"]["ours"] = {"forward_s": row["forward"]["median_s"],
+                                "train_step_s": row["train_step"]["median_s"]}
+    ref = results["peers"]["peers"][REFERENCE_PEER]
+    log(f"against {REFERENCE_PEER} (quoted 0.54 s / 1.53 s): forward "
+        f"{ref['forward_ratio']:.2f}x, training step "
+        f"{ref['train_step_ratio']:.2f}x their time (target <= "
+        f"{TARGET_PEER_RATIO}: forward "
+        f"{_met(results['peers']['forward_target_met'])}, training "
+        f"{_met(results['peers']['train_step_target_met'])})")
+  results["split"] = measure_split(sizes.split_model, sand, sizes, log)
+  split_fwd = next((r["forward"]["median_s"] for r in steps
+                    if r["model"]["config"] == sizes.split_model and
+                    r["scene"] == "sand_block" and not r["padded"]), None)
+  results["anatomy"] = measure_anatomy(sizes.split_model, sand, sizes,
+                                       split_fwd, log)
+  end = measure_matmul(sizes.matmul_size, sizes.matmul_repeats)
+  log(f"matmul rate (end): {end['median_gflops']:.1f} GFLOP/s")
+  matmul = statistics.median(start["gflops_all"] + end["gflops_all"])
+  results["matmul"] = {"size": sizes.matmul_size, "start": start, "end": end,
+                       "median_gflops": matmul}
+  add_matmul_fractions(results, matmul)
+  for row in results["steps"]:
+    log(f"{row['model']['config']} model on {row['scene']}"
+        + (" (padded)" if row["padded"] else "") + ": forward at "
+        f"{row['forward_gflops_dense']:.1f} GFLOP/s = "
+        f"{_pct(row['forward_matmul_fraction_dense'])} of the run's "
+        f"{matmul:.1f} GFLOP/s matmul rate (target "
+        f"{_pct(TARGET_MATMUL_FRACTION)})")
+  results["environment"]["load_average_end"] = list(os.getloadavg())
+
+  markdown = to_markdown(results)
+  os.makedirs(out_dir, exist_ok=True)
+  stem = os.path.join(out_dir, "gns_benchmark" + ("_quick" if quick else ""))
+  _write_atomic(stem + ".json",
+                json.dumps(results, indent=1, default=_json_default) + "\n")
+  _write_atomic(stem + ".md", markdown)
+  results["markdown"] = markdown
+  results["files"] = [stem + ".json", stem + ".md"]
+  return results

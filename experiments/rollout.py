@@ -1,0 +1,36 @@
+"""Rolls a trained model out on a split; writes predicted and true files.
+
+  python -m experiments.rollout --workdir=RUN --data=DATA --out=DIR \
+      [--split=test] [--max_trajectories=3]
+
+Writes ``DIR/predicted.h5`` and ``DIR/truth.h5`` (trajectory files with the
+same groups; frames before the model's first prediction are the true inputs).
+"""
+
+import os
+
+from absl import app
+from absl import flags
+
+from experiments import runtime
+from experiments import tasks
+
+_WORKDIR = flags.DEFINE_string("workdir", None, "Training run directory.")
+_DATA = flags.DEFINE_string("data", None, "Dataset directory.")
+_OUT = flags.DEFINE_string("out", None, "Output directory.")
+_SPLIT = flags.DEFINE_string("split", "test", "Which split to roll out.")
+_MAX = flags.DEFINE_integer("max_trajectories", None, "First N only.")
+
+
+def main(argv):
+  del argv
+  runtime.enable_compilation_cache()
+  paths = tasks.rollout_to_files(_WORKDIR.value, _DATA.value, _OUT.value,
+                                 _SPLIT.value, _MAX.value)
+  for name, path in paths.items():
+    print(f"{name}: {path}")
+
+
+if __name__ == "__main__":
+  flags.mark_flags_as_required(["workdir", "data", "out"])
+  app.run(main)
