@@ -89,30 +89,107 @@ def rollout_to_files(workdir: str, data_dir: str, out_dir: str,
   return paths
 
 
-def demo_scene(num_frames: int = 600) -> mpm.Scene:
-  """The paper's Figure 2 set-up: 900 particles, one semicircle."""
-  return mpm.Scene.from_dict({
-      "name": "figure2",
-      "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}],
-      "granular": {"box": list(mpm.scene.Granular.box), "spacing": 0.005,
-                   "num_particles": 900},
-      "num_frames": num_frames,
-  })
+# A small pretrained model shipped with the project (experiments/configs/
+# small.py); see its provenance.json.
+PRETRAINED = os.path.join(os.path.dirname(__file__), "pretrained", "small")
 
 
-def demo(out_dir: str, num_frames: int = 600) -> dict[str, str]:
-  """Simulates the demo scene, renders it; returns the paths written."""
+def demo_config(num_train: int, num_test: int, steps: int,
+                num_frames: int = 600):
+  """configs/small.py with a demo-sized dataset and a short training."""
+  from experiments.configs import small  # pylint: disable=g-import-not-at-top
+  config = small.get_config()
+  config.dataset.num_frames = num_frames
+  config.dataset.num_train = num_train
+  config.dataset.num_test = num_test
+  config.train.num_steps = steps
+  config.checkpoint.every_steps = 100
+  config.checkpoint.named_steps = ()
+  config.eval.every_steps = 0
+  return config
+
+
+def _ship_checkpoint(source: str, workdir: str) -> int:
+  """Copies a shipped checkpoint into ``workdir``; returns its step."""
+  import shutil  # pylint: disable=g-import-not-at-top
+  steps = sorted(int(d) for d in os.listdir(os.path.join(source, "checkpoints"))
+                 if d.isdigit())
+  target = os.path.join(workdir, "checkpoints", str(steps[-1]))
+  if not os.path.exists(target):
+    shutil.copytree(os.path.join(source, "checkpoints", str(steps[-1])),
+                    target)
+  return steps[-1]
+
+
+def demo(out_dir: str, *, num_train: int = 4, num_test: int = 7,
+         num_frames: int = 600, finetune_steps: int = 200,
+         pretrained: str | None = PRETRAINED,
+         workers: int = 2) -> dict[str, str]:
+  """The end-to-end demo: data, model, rollout of an unseen scene, pictures.
+
+  1. Generates a small dataset (the small config's physics, few scenes).
+  2. Fine-tunes the shipped pretrained small model on it for
+     ``finetune_steps`` steps (or, without one, trains from scratch).
+  3. Rolls the model out on the test scene with the triangle obstacle, a
+     shape never seen in training, and measures it against the MPM and a
+     constant-velocity baseline.
+  4. Writes the metrics and an MPM | GNS animation and frame grid.
+  """
+  from gnsjax import evaluate as evaluate_lib  # pylint: disable=g-import-not-at-top
+  from gnsjax import metrics  # pylint: disable=g-import-not-at-top
+  from gnsjax import train  # pylint: disable=g-import-not-at-top
+  from mpm import dataset  # pylint: disable=g-import-not-at-top
+
   os.makedirs(out_dir, exist_ok=True)
-  scene = demo_scene(num_frames)
-  paths = {"scene": os.path.join(out_dir, "scene.json"),
-           "trajectory": os.path.join(out_dir, "trajectory.h5")}
-  with open(paths["scene"], "w") as f:
-    f.write(scene.to_json(indent=2))
-  result = simulate_to_file(scene, paths["trajectory"])
-  paths["animation"], paths["frames"] = render_file(paths["trajectory"],
-                                                    out_dir)
-  print(f"MPM: {result.positions.shape[0]} frames of "
-        f"{result.positions.shape[1]} particles in {result.wall_time_s:.2f} s "
-        f"({result.n_substeps} substeps/frame; compiling took "
-        f"{result.compile_time_s:.2f} s)")
+  data_dir = os.path.join(out_dir, "data")
+  workdir = os.path.join(out_dir, "run")
+  os.makedirs(workdir, exist_ok=True)
+  start = 0
+  if pretrained and os.path.isdir(os.path.join(pretrained, "checkpoints")):
+    start = _ship_checkpoint(pretrained, workdir)
+  config = demo_config(num_train, num_test, start + finetune_steps,
+                       num_frames)
+  spec = dataset.DatasetSpec(**config.dataset.to_dict())
+  with tqdm.tqdm(total=spec.num_train + spec.num_test, unit="traj",
+                 desc="dataset") as bar:
+    dataset.generate(spec, data_dir, workers=workers,
+                     progress=lambda done, *_: bar.update(done - bar.n))
+  train.train_and_evaluate(config, data_dir, workdir)
+
+  _, problem, trainer, state, step = evaluate_lib.load_run(workdir, data_dir)
+  c = config.train.input_frames
+  results = evaluate_lib.rollout_split(
+      trainer, state, problem, data.split_path(data_dir, "test"), c)
+  r = next(r for r in results if r["group"] == "triangle")
+  t = r["trajectory"]
+  v = t.positions[c - 1] - t.positions[c - 2]
+  constant = t.positions[c - 1][None] + v[None] * np.arange(
+      1, len(r["truth"]) + 1)[:, None, None]
+  result = {
+      "scene": t.scene.name, "model_step": step, "fine_tuned_from": start,
+      "particles": int(t.positions.shape[1]), "steps": len(r["truth"]),
+      "gns_mean_mse_m2": float(np.mean(r["mse"])),
+      "gns_final_mse_m2": float(r["mse"][-1]),
+      "constant_velocity_mean_mse_m2": float(np.mean(
+          metrics.positional_mse(constant, r["truth"]))),
+      "gns_final_runout_error_m": float(r["runout_error"][-1]),
+      "gns_deposit_error_m": r["deposit_error"],
+  }
+  paths = {"data": data_dir, "run": workdir,
+           "metrics": os.path.join(out_dir, "metrics.json"),
+           "truth": os.path.join(out_dir, "truth.h5"),
+           "predicted": os.path.join(out_dir, "predicted.h5")}
+  mpm_io.write_json(paths["metrics"], result)
+  stats = {k: v for k, v in mpm_io.read_header(
+      data.split_path(data_dir, "test")).items() if k.endswith(("_mean",
+                                                                "_std"))}
+  mpm_io.write_trajectories(paths["truth"], [t], stats=stats)
+  mpm_io.write_trajectories(paths["predicted"], [dataclasses.replace(
+      t, positions=np.concatenate([t.positions[:c], r["predicted"]]).astype(
+          np.float32))], stats=stats)
+  paths["animation"], paths["frames"] = render_file(
+      paths["truth"], out_dir, compare_path=paths["predicted"])
+  for k, value in result.items():
+    print(f"{k:>32}: {value:.4g}" if isinstance(value, float) else
+          f"{k:>32}: {value}")
   return paths

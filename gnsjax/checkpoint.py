@@ -57,3 +57,9 @@ def read_config(mngr: ocp.CheckpointManager, step: int) -> dict:
   """The config stored with a checkpoint, without restoring arrays."""
   return mngr.restore(step, args=ocp.args.Composite(
       config=ocp.args.JsonRestore()))["config"]
+
+
+def read_stats(mngr: ocp.CheckpointManager, step: int) -> dict:
+  """The normalisation statistics stored with a checkpoint."""
+  return mngr.restore(step, args=ocp.args.Composite(
+      stats=ocp.args.JsonRestore()))["stats"]

@@ -46,11 +46,14 @@ def load_run(workdir: str, data_dir: str, step: int | None = None):
   with open(os.path.join(workdir, "config.json")) as f:
     import ml_collections  # pylint: disable=g-import-not-at-top
     config = ml_collections.ConfigDict(json.load(f))
-  problem = train.load_problem(data_dir, config)
-  trainer = train.Trainer(config, problem)
   mngr = checkpoint.manager(workdir, config.checkpoint.every_steps,
                             config.checkpoint.named_steps)
   step = mngr.latest_step() if step is None else step
+  if step is None:
+    raise FileNotFoundError(f"{workdir}: no checkpoint to evaluate")
+  problem = train.load_problem(data_dir, config,
+                               checkpoint.read_stats(mngr, step))
+  trainer = train.Trainer(config, problem)
   state, _, _ = checkpoint.restore(mngr, trainer.init_state(0), step)
   mngr.close()
   return config, problem, trainer, state, step

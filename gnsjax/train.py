@@ -95,9 +95,14 @@ class Problem:
     return {k: np.asarray(v).tolist() for k, v in self.stats._asdict().items()}
 
 
-def load_problem(data_dir: str, config) -> Problem:
+def load_problem(data_dir: str, config, stats: dict | None = None) -> Problem:
+  """The dataset's problem; ``stats`` (a checkpoint's) replace the data's."""
   train_path = data.split_path(data_dir, "train")
-  stats = features.Stats(*data.load_stats(train_path))
+  if stats is None:
+    stats = features.Stats(*data.load_stats(train_path))
+  else:
+    stats = features.Stats(*(np.asarray(stats[k], np.float32)
+                             for k in features.Stats._fields))
   header = mpm_io.read_header(train_path)
   radius = float(config.model.connectivity_radius or
                  header["connectivity_radius"])
@@ -148,15 +153,23 @@ def _config_dict(config) -> dict:
   return json.loads(config.to_json_best_effort())
 
 
+# Dataset settings a model depends on (others, like trajectory counts, may
+# change between a run and its fine-tuning).
+_DATA_PHYSICS = ("spacing", "connectivity_radius")
+
+
 def check_compatible(stored: dict, config) -> None:
-  """Refuses to resume a run whose model or data settings differ."""
+  """Refuses to resume a run whose model or data physics differ."""
   current = _config_dict(config)
-  for section in ("model", "dataset"):
-    if stored.get(section) != current.get(section):
+  pairs = [("model", stored.get("model"), current.get("model"))] + [
+      (f"dataset.{k}", stored.get("dataset", {}).get(k),
+       current.get("dataset", {}).get(k)) for k in _DATA_PHYSICS]
+  for where, old, new in pairs:
+    if old != new:
       raise ValueError(
-          f"the checkpoint was trained with another config: its '{section}' "
-          f"section is {stored.get(section)}, this config has "
-          f"{current.get(section)}; use a new --workdir or the same config")
+          f"the checkpoint was trained with another config: its '{where}' is "
+          f"{old}, this config has {new}; use a new --workdir or the same "
+          "config")
 
 
 def _mesh():
@@ -322,14 +335,18 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   if tcfg.batch_size % jax.local_device_count():
     raise ValueError(f"train.batch_size = {tcfg.batch_size} must be a "
                      f"multiple of the {jax.local_device_count()} devices")
-  problem = load_problem(data_dir, config)
-  trainer = Trainer(config, problem)
   mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
                             cfg.checkpoint.named_steps, cfg.checkpoint.keep)
   config_dict = _config_dict(config)
-  state = trainer.init_state(tcfg.seed)
+  stored_stats = None
   if mngr.latest_step() is not None:
     check_compatible(checkpoint.read_config(mngr, mngr.latest_step()), config)
+    stored_stats = checkpoint.read_stats(mngr, mngr.latest_step())
+  # A resumed (or fine-tuned) model keeps the statistics it was trained with.
+  problem = load_problem(data_dir, config, stored_stats)
+  trainer = Trainer(config, problem)
+  state = trainer.init_state(tcfg.seed)
+  if stored_stats is not None:
     state, _, _ = checkpoint.restore(mngr, state)
     state = jax.device_put(state, trainer.replicated)
     logging.info("resumed from step %d", int(state.step))

@@ -85,11 +85,16 @@ class EntryPointsTest(absltest.TestCase):
                             f"--out={out}", "--verify"))
 
   def test_demo(self):
-    out = run("experiments.demo", f"--out={self.dir}/demo", "--num_frames=15")
-    for name in ("trajectory.h5", "animation.gif", "frames.png",
-                 "scene.json"):
+    out = run("experiments.demo", f"--out={self.dir}/demo", "--num_frames=16",
+              "--num_train=2", "--finetune_steps=2", "--nopretrained")
+    for name in ("metrics.json", "animation.gif", "frames.png", "truth.h5",
+                 "predicted.h5"):
       self.assertIn(name, out)
       self.assertTrue(os.path.exists(os.path.join(self.dir, "demo", name)))
+    with open(os.path.join(self.dir, "demo", "metrics.json")) as f:
+      metrics = json.load(f)
+    self.assertIn("triangle", metrics["scene"])
+    self.assertGreater(metrics["constant_velocity_mean_mse_m2"], 0)
 
 
 if __name__ == "__main__":
