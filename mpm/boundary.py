@@ -4,9 +4,14 @@ Solids (ramp and obstacles) and the domain's walls act on grid velocities
 through signed distances phi (negative inside). At a node, a velocity with an
 inward normal part v_n < 0 loses it, and its tangential part shrinks by
 mu |v_n| (stopping when that exceeds it); a velocity leaving the surface is
-left alone, so sand can separate. The condition acts fully at phi <= -dx/2, not
-at all at phi >= dx/2, and linearly between: the surface sits at phi = 0 on
-average and moving it (an obstacle's x) changes the result smoothly.
+left alone, so sand can separate. The condition acts fully on nodes on or
+inside a solid (phi <= 0), not at all from one cell outside (phi >= dx), and
+linearly between, so moving a surface (an obstacle's x) changes the result
+smoothly. Full strength at phi <= 0 matters: a node that only partly removes
+a stuck velocity lets a sustained load (sand resting on a slope or a floor)
+leak through it and creep.
+
+The domain's walls get the same weighting, with each wall's own distance.
 
 Only nodes within reach of sand get a condition: the ``BoundaryField`` lists
 them (a band along the surfaces, not the whole grid), so this costs in
@@ -51,8 +56,9 @@ class BoundaryField:
   phi: jax.Array
 
 
-def _soft_weight(phi, dx):
-  return jnp.clip(0.5 - phi / dx, 0.0, 1.0)
+def _weight(dist, dx):
+  """Full on and beyond a surface (dist <= 0), zero from one cell outside."""
+  return jnp.clip(1.0 - dist / dx, 0.0, 1.0)
 
 
 def _wall_distances(p, width, height):
@@ -81,9 +87,9 @@ def select_nodes(spec: transfer.GridSpec, width: float, height: float,
   p = jnp.asarray(spec.node_positions(), jnp.float32)
   phi = np.asarray(geometry._solid_sdf(ramp, obstacles, p)) / spec.dx  # pylint: disable=protected-access
   dist_x, dist_y, _, _ = map(np.asarray, _wall_distances(p, width, height))
-  near = ((phi < 0.5 + margin_cells) |
-          (dist_x / spec.dx < 0.5 + margin_cells) |
-          (dist_y / spec.dx < 0.5 + margin_cells))
+  near = ((phi < 1.0 + margin_cells) |
+          (dist_x / spec.dx < 1.0 + margin_cells) |
+          (dist_y / spec.dx < 1.0 + margin_cells))
   reachable = phi > -_DEPTH_CELLS - margin_cells
   touched = np.arange(spec.n_nodes) >= 2 * spec.shape[1]
   return np.flatnonzero(near & reachable & touched).astype(np.int32)
@@ -107,10 +113,10 @@ def make_field(spec: transfer.GridSpec, index: jax.Array, width: float,
   return BoundaryField(
       index=index,
       solid_normal=normal,
-      solid_weight=_soft_weight(phi, spec.dx) * real,
+      solid_weight=_weight(phi, spec.dx) * real,
       wall_normal=jnp.stack([sign_x, sign_y], -1),
-      wall_weight=jnp.stack([_soft_weight(dist_x, spec.dx),
-                             _soft_weight(dist_y, spec.dx)], -1) * real[:, None],
+      wall_weight=jnp.stack([_weight(dist_x, spec.dx),
+                             _weight(dist_y, spec.dx)], -1) * real[:, None],
       phi=sdf(nodes))
 
 

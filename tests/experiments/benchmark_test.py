@@ -41,7 +41,8 @@ class BenchmarkQuickTest(absltest.TestCase):
     if not FLAGS.is_parsed():
       FLAGS.mark_as_parsed()
     out = self.create_tempdir().full_path
-    with flagsaver.flagsaver(out=out, quick=True, taichi=HAS_TAICHI):
+    with flagsaver.flagsaver(out=out, quick=True, taichi=HAS_TAICHI,
+                             what=["mpm"]):
       benchmark.main(["benchmark"])
 
     with open(os.path.join(out, "mpm_benchmark_quick.json")) as f:

@@ -1,0 +1,253 @@
+"""Tests for `mpm.constitutive`."""
+
+import math
+
+from absl.testing import absltest
+from absl.testing import parameterized
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mpm import constitutive
+
+E, NU = 3.537e5, 0.3  # the paper's sand [Pa]
+MU, LAM = constitutive.lame_parameters(E, NU)
+
+# Jitted once each: eager dispatch of their many small ops is slow.
+_project = jax.jit(constitutive.project)
+_project_principal = jax.jit(constitutive.project_principal)
+_stress = jax.jit(constitutive.kirchhoff_stress)
+_log_strain = jax.jit(constitutive.log_strain)
+
+
+def _rotation(angle):
+  c, s = np.cos(angle), np.sin(angle)
+  return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def _random_f(rng, n, log_mean=(-0.05, 0.03), log_spread=0.06):
+  """F = R(a) diag(exp(e)) R(b): random rotations and principal log strains."""
+  e = rng.uniform(log_mean[0], log_mean[1], (n, 1)) + rng.uniform(
+      -log_spread, log_spread, (n, 2))
+  ra = _rotation(rng.uniform(-np.pi, np.pi, n))
+  rb = _rotation(rng.uniform(-np.pi, np.pi, n))
+  return ra @ (np.exp(e)[..., :, None] * rb)
+
+
+def _principal(tau):
+  """Principal values (ascending) of symmetric 2x2 stresses, numpy float64."""
+  return np.linalg.eigvalsh(np.asarray(tau, np.float64))
+
+
+class LameTest(absltest.TestCase):
+
+  def test_inverts_to_youngs_modulus_and_poisson_ratio(self):
+    mu, lam = constitutive.lame_parameters(E, NU)
+    np.testing.assert_allclose(mu * (3 * lam + 2 * mu) / (lam + mu), E,
+                               rtol=1e-12, atol=0)
+    np.testing.assert_allclose(lam / (2 * (lam + mu)), NU, rtol=1e-12, atol=0)
+
+
+class LogStrainTest(absltest.TestCase):
+
+  def test_matches_eigendecomposition(self):
+    rng = np.random.default_rng(0)
+    f = _random_f(rng, 500, log_spread=0.3)
+    trace, dev = _log_strain(jnp.asarray(f, jnp.float32))
+    b = f @ np.swapaxes(f, -1, -2)
+    w, v = np.linalg.eigh(b)
+    eps = 0.5 * np.einsum("nij,nj,nkj->nik", v, np.log(w), v)
+    np.testing.assert_allclose(trace, np.trace(eps, axis1=1, axis2=2),
+                               atol=1e-5, rtol=0)
+    np.testing.assert_allclose(dev[:, 0], (eps[:, 0, 0] - eps[:, 1, 1]) / 2,
+                               atol=1e-5, rtol=0)
+    np.testing.assert_allclose(dev[:, 1], eps[:, 0, 1], atol=1e-5, rtol=0)
+
+
+class KirchhoffStressTest(parameterized.TestCase):
+
+  def test_zero_at_identity(self):
+    tau = constitutive.kirchhoff_stress(jnp.eye(2)[None], MU, LAM)
+    np.testing.assert_allclose(tau, 0.0, atol=1e-6, rtol=0)
+
+  def test_zero_for_rigid_rotations(self):
+    f = _rotation(np.linspace(-3, 3, 7)).astype(np.float32)
+    tau = _stress(jnp.asarray(f), MU, LAM)
+    # Pa; float32 log of 1 +- ulp times a 1e5 modulus.
+    np.testing.assert_allclose(tau, 0.0, atol=0.5, rtol=0)
+
+  def test_symmetric(self):
+    f = _random_f(np.random.default_rng(1), 200).astype(np.float32)
+    tau = np.asarray(_stress(jnp.asarray(f), MU, LAM))
+    np.testing.assert_allclose(tau, np.swapaxes(tau, -1, -2), atol=1e-3,
+                               rtol=0)
+
+  def test_objectivity(self):
+    rng = np.random.default_rng(2)
+    f = _random_f(rng, 200)
+    r = _rotation(rng.uniform(-np.pi, np.pi, 200))
+    with jax.enable_x64(True):
+      tau = np.asarray(_stress(jnp.asarray(f), MU, LAM))
+      tau_r = np.asarray(_stress(jnp.asarray(r @ f), MU,
+                                                       LAM))
+    expected = r @ tau @ np.swapaxes(r, -1, -2)
+    # float64: relative to stresses of O(1e4) Pa.
+    np.testing.assert_allclose(tau_r, expected, atol=1e-6, rtol=0)
+
+  def test_is_the_gradient_of_the_hencky_energy(self):
+    # psi = mu |eps|^2 + lam/2 tr(eps)^2 with eps = log(V); tau = dpsi/dF F^T.
+    def energy(f):
+      trace, dev = constitutive.log_strain(f)
+      return MU * (trace**2 / 2 + 2 * jnp.sum(dev**2)) + LAM / 2 * trace**2
+
+    f = _random_f(np.random.default_rng(3), 50, log_spread=0.2)
+    with jax.enable_x64(True):
+      grads = jax.jit(jax.vmap(jax.grad(energy)))(jnp.asarray(f))
+      tau = np.asarray(_stress(jnp.asarray(f), MU, LAM))
+    np.testing.assert_allclose(np.asarray(grads) @ np.swapaxes(f, -1, -2), tau,
+                               atol=1e-6, rtol=1e-9)
+
+  def test_linearises_to_hooke_at_identity(self):
+    h = np.array([[0.3, -0.2], [0.5, 0.1]])
+    _, dtau = jax.jvp(lambda f: constitutive.kirchhoff_stress(f, MU, LAM),
+                      (jnp.eye(2),), (jnp.asarray(h, jnp.float32),))
+    sym = (h + h.T) / 2
+    expected = 2 * MU * sym + LAM * np.trace(h) * np.eye(2)
+    self.assertTrue(np.all(np.isfinite(dtau)))
+    np.testing.assert_allclose(dtau, expected, rtol=1e-5, atol=1e-2)
+
+
+class ProjectTest(parameterized.TestCase):
+
+  @parameterized.parameters(20.0, 35.0, 50.0)
+  def test_matches_principal_form(self, phi_deg):
+    rng = np.random.default_rng(int(phi_deg))
+    n = 2000
+    f = _random_f(rng, n)
+    vc = np.where(rng.uniform(size=n) < 0.5, 0.0, rng.uniform(0, 0.05, n))
+    alpha = constitutive.friction_coefficient(math.radians(phi_deg))
+    with jax.enable_x64(True):
+      args = (jnp.asarray(f), jnp.asarray(vc), MU, LAM, alpha)
+      f_t, vc_t = map(np.asarray, _project(*args))
+      f_p, vc_p = map(np.asarray, _project_principal(*args))
+      trace, dev = map(np.asarray, _log_strain(jnp.asarray(f)))
+    # The sample covers all three branches of the return mapping.
+    trace_c = trace + vc
+    dev_norm = np.sqrt(2 * np.sum(dev**2, -1))
+    on_cone = (trace_c < 0) & (dev_norm + (LAM + MU) / MU * alpha * trace_c > 0)
+    self.assertGreater(np.sum(trace_c >= 0), n // 10)
+    self.assertGreater(np.sum(on_cone), n // 10)
+    self.assertGreater(np.sum(~on_cone & (trace_c < 0)), n // 10)
+    # float64 on both sides; the SVD form differs only by rounding.
+    np.testing.assert_allclose(f_t, f_p, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(vc_t, vc_p, atol=1e-12, rtol=0)
+
+  @parameterized.parameters(20.0, 35.0, 50.0)
+  def test_returns_to_mohr_coulomb_cone(self, phi_deg):
+    rng = np.random.default_rng(10 + int(phi_deg))
+    n = 1000
+    # Compressed (trace < 0) with large shear: the trial state is outside.
+    f = _random_f(rng, n, log_mean=(-0.05, -0.02), log_spread=0.0)
+    shear = _rotation(rng.uniform(-np.pi, np.pi, n))
+    g = rng.uniform(0.1, 0.3, n)
+    f = shear @ (np.exp(np.stack([g, -g], -1))[..., :, None] *
+                 np.swapaxes(shear, -1, -2)) @ f
+    phi = math.radians(phi_deg)
+    with jax.enable_x64(True):
+      alpha = constitutive.friction_coefficient(phi)
+      tau_trial = _stress(jnp.asarray(f), MU, LAM)
+      f_new, vc = _project(jnp.asarray(f), jnp.zeros(n), MU, LAM,
+                                       alpha)
+      tau = _stress(f_new, MU, LAM)
+    s_trial = _principal(tau_trial)
+    s = _principal(tau)
+    # The trial states violate |s1 - s2| <= -(s1 + s2) sin(phi) ...
+    self.assertTrue(np.all(s_trial[:, 1] - s_trial[:, 0] >
+                           -(s_trial[:, 0] + s_trial[:, 1]) * math.sin(phi)))
+    # ... and the projected ones meet it with equality, at the same pressure.
+    np.testing.assert_allclose(s[:, 1] - s[:, 0],
+                               -(s[:, 0] + s[:, 1]) * math.sin(phi),
+                               rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(s.sum(-1), s_trial.sum(-1), rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(vc, 0.0, atol=0, rtol=0)
+
+  def test_elastic_inside_cone(self):
+    # Pure compression with a little shear: inside the cone, F unchanged.
+    f = np.diag([np.exp(-0.02 + 0.001), np.exp(-0.02 - 0.001)])[None]
+    alpha = constitutive.friction_coefficient(math.radians(35.0))
+    with jax.enable_x64(True):
+      f_new, vc = _project(jnp.asarray(f), jnp.zeros(1), MU, LAM,
+                                       alpha)
+    np.testing.assert_allclose(f_new, f, atol=1e-12, rtol=0)
+    np.testing.assert_allclose(vc, 0.0, atol=0, rtol=0)
+
+  def test_expansion_is_stress_free_and_stores_volume(self):
+    rng = np.random.default_rng(4)
+    n = 100
+    f = _random_f(rng, n, log_mean=(0.01, 0.05), log_spread=0.005)
+    vc0 = rng.uniform(0, 0.02, n)
+    alpha = constitutive.friction_coefficient(math.radians(35.0))
+    with jax.enable_x64(True):
+      f_new, vc = _project(jnp.asarray(f), jnp.asarray(vc0), MU,
+                                       LAM, alpha)
+      tau = np.asarray(_stress(f_new, MU, LAM))
+    f_new = np.asarray(f_new)
+    # F becomes the rotation of its polar decomposition.
+    np.testing.assert_allclose(np.swapaxes(f_new, -1, -2) @ f_new,
+                               np.broadcast_to(np.eye(2), (n, 2, 2)),
+                               atol=1e-12, rtol=0)
+    np.testing.assert_allclose(np.linalg.det(f_new), 1.0, atol=1e-12, rtol=0)
+    u, _, vt = np.linalg.svd(f)
+    np.testing.assert_allclose(f_new, u @ vt, atol=1e-12, rtol=0)
+    np.testing.assert_allclose(tau, 0.0, atol=1e-6, rtol=0)
+    # The extra volume is remembered: v_c += log det F.
+    np.testing.assert_allclose(vc, vc0 + np.log(np.linalg.det(f)), atol=1e-12,
+                               rtol=0)
+
+  def test_compression_first_takes_up_stored_volume(self):
+    # 1% compression against 2% of stored separation: still stress free.
+    f = np.exp(-0.005) * np.eye(2)[None]
+    alpha = constitutive.friction_coefficient(math.radians(35.0))
+    with jax.enable_x64(True):
+      f_new, vc = _project(jnp.asarray(f), jnp.asarray([0.02]),
+                                       MU, LAM, alpha)
+    np.testing.assert_allclose(f_new, np.eye(2)[None], atol=1e-12, rtol=0)
+    np.testing.assert_allclose(vc, [0.01], atol=1e-12, rtol=0)
+
+  def test_gradients_finite_at_identity(self):
+    alpha = constitutive.friction_coefficient(math.radians(35.0))
+
+    def loss(f, vc):
+      f_new, vc_new = _project(f, vc, MU, LAM, alpha)
+      tau = _stress(f_new, MU, LAM)
+      return jnp.sum(tau**2) + jnp.sum(f_new * f_new) + jnp.sum(vc_new)
+
+    f = jnp.broadcast_to(jnp.eye(2), (3, 2, 2))
+    g_f, g_vc = jax.jit(jax.grad(loss, argnums=(0, 1)))(f, jnp.zeros(3))
+    self.assertTrue(np.all(np.isfinite(g_f)))
+    self.assertTrue(np.all(np.isfinite(g_vc)))
+    # At F = I the expansion branch is taken (F -> R, v_c -> log det F):
+    # d(sum R.R)/dF = 0 and d(v_c)/dF = I.
+    np.testing.assert_allclose(g_f, np.broadcast_to(np.eye(2), (3, 2, 2)),
+                               atol=1e-5, rtol=0)
+
+    g_tau = jax.jacfwd(lambda f: constitutive.kirchhoff_stress(f, MU, LAM))(
+        jnp.eye(2))
+    self.assertTrue(np.all(np.isfinite(g_tau)))
+
+  def test_gradient_finite_on_cone_and_inside(self):
+    alpha = constitutive.friction_coefficient(math.radians(35.0))
+    f = _random_f(np.random.default_rng(5), 200,
+                  log_mean=(-0.05, -0.01)).astype(np.float32)
+
+    def loss(f):
+      f_new, _ = _project(f, jnp.zeros(f.shape[0]), MU, LAM, alpha)
+      return jnp.sum(_stress(f_new, MU, LAM))
+
+    grad = jax.jit(jax.grad(loss))(jnp.asarray(f))
+    self.assertTrue(np.all(np.isfinite(grad)))
+    self.assertGreater(np.max(np.abs(grad)), 0.0)
+
+
+if __name__ == "__main__":
+  absltest.main()
