@@ -1,0 +1,113 @@
+"""Dataset benchmark: generation throughput and reading speed.
+
+``run_benchmark(out_dir)`` measures, in one run on this machine:
+
+1. the wall time to generate 20 paper trajectories (16 training, 4 test
+   scenes of the paper's plan, 600 frames) with 1 and with 2 worker
+   processes, compilation included (it is part of generating), and the
+   extrapolation to the paper's 1100;
+2. windows read per second from a dataset file (random access, the training
+   path) and padded batches assembled per second.
+
+Writes ``dataset_benchmark.json`` and ``.md`` to ``out_dir``.
+"""
+
+import datetime
+import os
+import platform
+import tempfile
+import time
+
+from gnsjax import batching
+from gnsjax import data
+from gnsjax import graph
+from mpm import dataset
+from mpm import io as mpm_io
+
+PAPER_TOTAL = 1100
+
+
+def time_generation(spec: dataset.DatasetSpec, workers: int,
+                    cache: str | None) -> dict:
+  with tempfile.TemporaryDirectory() as d:
+    start = time.perf_counter()
+    meta = dataset.generate(spec, d, workers=workers,
+                            compilation_cache=cache)
+    wall = time.perf_counter() - start
+    size = sum(os.path.getsize(os.path.join(d, f)) for f in os.listdir(d))
+  n = spec.num_train + spec.num_test
+  return {"workers": workers, "trajectories": n, "wall_s": wall,
+          "simulation_s": meta["wall_time_s"]["train"] +
+          meta["wall_time_s"]["test"],
+          "bytes": size, "extrapolated_1100_min": wall / n * PAPER_TOTAL / 60}
+
+
+def time_reading(data_dir: str, windows: int = 2000, batch_size: int = 2,
+                 batches: int = 200) -> dict:
+  path = data.split_path(data_dir, "train")
+  header = mpm_io.read_header(path)
+  spec = graph.GraphSpec(float(header["connectivity_radius"]),
+                         tuple(map(tuple, header["bounds"])))
+  with data.WindowDataset(path, seed=0) as ds:
+    ds[0]
+    start = time.perf_counter()
+    for k in range(windows):
+      ds[k]
+    read = windows / (time.perf_counter() - start)
+    start = time.perf_counter()
+    for b in range(batches):
+      batching.make_batch([ds[b * batch_size + i] for i in range(batch_size)],
+                          spec)
+    assembled = batches / (time.perf_counter() - start)
+  return {"windows_per_s": read, "batches_per_s": assembled,
+          "batch_size": batch_size}
+
+
+def run_benchmark(out_dir: str, read_data: str | None = None,
+                  quick: bool = False, cache: str | None = None,
+                  log=print) -> dict:
+  """Measures generation and reading; writes JSON and Markdown."""
+  os.makedirs(out_dir, exist_ok=True)
+  spec = dataset.DatasetSpec(num_train=2 if quick else 16,
+                             num_test=1 if quick else 4,
+                             num_frames=20 if quick else 600,
+                             spacing=0.01 if quick else 0.005)
+  results = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(),
+             "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
+             "spec": dict(spec.__dict__), "generation": []}
+  for workers in (2, 1):
+    r = time_generation(spec, workers, cache)
+    log(f"generate {r['trajectories']} trajectories with {workers} "
+        f"worker(s): {r['wall_s']:.1f} s -> 1100 in "
+        f"{r['extrapolated_1100_min']:.1f} min")
+    results["generation"].append(r)
+  if read_data:
+    results["reading"] = time_reading(read_data, 200 if quick else 2000,
+                                      batches=20 if quick else 200)
+    log(f"reading: {results['reading']['windows_per_s']:.0f} windows/s, "
+        f"{results['reading']['batches_per_s']:.0f} batches/s")
+  g2, g1 = results["generation"]
+  lines = [
+      "## Dataset generation and reading", "",
+      f"{results['date']}, {results['machine']}.", "",
+      "| workers | trajectories | wall (s) | simulation (s) | per trajectory "
+      "(s) | 1100 trajectories (min) |", "|---|---|---|---|---|---|"]
+  for r in results["generation"]:
+    lines.append(f"| {r['workers']} | {r['trajectories']} | {r['wall_s']:.1f}"
+                 f" | {r['simulation_s']:.1f} | "
+                 f"{r['wall_s'] / r['trajectories']:.2f} | "
+                 f"{r['extrapolated_1100_min']:.1f} |")
+  lines += ["", f"Two workers vs one: {g1['wall_s'] / g2['wall_s']:.2f}x "
+            "faster."]
+  if "reading" in results:
+    r = results["reading"]
+    lines += ["", f"Reading `{read_data}`: {r['windows_per_s']:.0f} random "
+              f"windows/s; {r['batches_per_s']:.0f} padded batches of "
+              f"{r['batch_size']} windows/s."]
+  results["markdown"] = "\n".join(lines) + "\n"
+  name = "dataset_benchmark_quick" if quick else "dataset_benchmark"
+  mpm_io.write_json(os.path.join(out_dir, f"{name}.json"),
+                    {k: v for k, v in results.items() if k != "markdown"})
+  with open(os.path.join(out_dir, f"{name}.md"), "w") as f:
+    f.write(results["markdown"])
+  return results
