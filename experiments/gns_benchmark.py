@@ -26,25 +26,26 @@ writes what it measured (JSON and Markdown) to a directory:
 2. peers, quoted from ``/work/shared/bench/README.md`` (not re-run):
    geoelements/gns and LagrangeBench on the sand block; ours as a ratio.
 3. this machine's matmul rate in the same run (jitted 2048x2048 float32
-   matmuls, at the start and at the end) and the model's achieved FLOP rate
-   as a fraction of it;
+   matmuls, interleaved with every measurement above) and the model's
+   achieved FLOP rate as a fraction of the rate measured beside it;
 4. the split first edge layer against the concatenated form (same graph,
    same function: the concatenated parameters are mapped from the split ones
    with ``models.split_to_concat_params``), timed interleaved, with the FLOPs
    of each (``models.processor_flops`` and XLA's cost analysis);
-5. the anatomy of one message-passing step: dense layers, gathers and
-   segment sums timed on their own at the same sizes, to tell what dominates.
+5. where the time goes: the paper model's forward and training step (both
+   forms) under ``jax.profiler``, operation time summed by kind (dense
+   layers, gathers, scatters, reductions, elementwise; ``op_profile``).
 
 Timing rules (DESIGN.md, "Honest timing"): compilation (timed separately) and
 a warm-up call are excluded; every call is waited on with
 ``jax.block_until_ready``; each figure is the median of repeats with the
-minimum beside it; comparisons within the run (split vs concatenated) are
-interleaved so that load from other processes falls on both.
+minimum beside it. Calls measured together (forward, training step and the
+matmul; split and concatenated forms) are interleaved, one call of each per
+round, so that load from other processes falls on all of them alike.
 """
 
 import dataclasses
 import datetime
-import functools
 import importlib
 import json
 import os
@@ -57,14 +58,16 @@ from typing import Any, Callable, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 
-import mpm
+from experiments import op_profile
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import models
 from gnsjax import rollout as rollout_lib
 from gnsjax import simulator
 from gnsjax import train
+import mpm
 from mpm import io as mpm_io
 
 # The shared benchmark input (README.md there).
@@ -102,35 +105,31 @@ class Sizes:
   Attributes:
     models: configs (``experiments/configs/<name>.py``) timed on each scene.
     split_model: config of the split-vs-concatenated comparison (and of the
-      padded-capacity row and the anatomy).
-    forward_repeats: timed forward calls per measurement.
-    train_repeats: timed training steps per measurement.
+      padded-capacity row and the profile).
+    repeats: timed rounds of each interleaved group (one forward, one
+      training step, one matmul per round).
     matmul_size: n of the n x n float32 matmul that sets the machine's rate.
-    matmul_repeats: timed matmuls (at the start, and again at the end).
     scene_frames: frames simulated for the paper scene.
     window_start: first frame of its window (C + 1 frames from there).
-    anatomy_repeats: timed calls of each part of a message-passing step.
     padded_row: also time the split model's forward on the padded capacity.
+    profile_repeats: profiled calls of each program (item 5).
   """
   models: tuple[str, ...] = ("paper", "small")
   split_model: str = "paper"
-  forward_repeats: int = 7
-  train_repeats: int = 5
+  repeats: int = 7
   matmul_size: int = 2048
-  matmul_repeats: int = 10
   scene_frames: int = 60
   window_start: int = 50
-  anatomy_repeats: int = 10
   padded_row: bool = True
+  profile_repeats: int = 2
 
 
 FULL = Sizes()
 # Tiny sizes that exercise every measurement in seconds (smoke tests): the
 # test config's model (latent 16, 2 steps), a short paper-scene simulation.
-QUICK = Sizes(models=("test",), split_model="test", forward_repeats=2,
-              train_repeats=2, matmul_size=256, matmul_repeats=2,
-              scene_frames=8, window_start=1, anatomy_repeats=2,
-              padded_row=True)
+QUICK = Sizes(models=("test",), split_model="test", repeats=2,
+              matmul_size=256, scene_frames=8, window_start=1,
+              profile_repeats=1)
 
 
 # ---------------------------------------------------------------- timing ---
@@ -172,19 +171,35 @@ def _compile(fn, *args):
   return compiled, compile_s, flops
 
 
-def measure_matmul(size: int, repeats: int) -> dict[str, Any]:
-  """GFLOP/s of a jitted float32 ``size x size`` matmul (2 n^3 FLOPs)."""
-  ka, kb = jax.random.split(jax.random.key(0))
-  a = jax.random.normal(ka, (size, size), jnp.float32)
-  b = jax.random.normal(kb, (size, size), jnp.float32)
-  compiled, _, _ = _compile(jax.jit(jnp.matmul), a, b)
-  t = time_calls({"matmul": lambda: compiled(a, b)}, repeats)["matmul"]
-  flops = 2.0 * size**3
-  rates = [flops / s / 1e9 for s in t["all_s"]]
-  return {"size": size, "flops": flops, "repeats": repeats,
-          "median_gflops": statistics.median(rates),
-          "max_gflops": max(rates), "gflops_all": rates,
-          "median_s": t["median_s"]}
+class Matmul:
+  """A jitted float32 ``size x size`` matmul of random matrices, the
+  machine's reference rate; every timing group runs it beside its own
+  calls, and ``samples`` collects each call's GFLOP/s (2 n^3 FLOPs)."""
+
+  def __init__(self, size: int):
+    ka, kb = jax.random.split(jax.random.key(0))
+    self.size = size
+    self.flops = 2.0 * size**3
+    self._args = (jax.random.normal(ka, (size, size), jnp.float32),
+                  jax.random.normal(kb, (size, size), jnp.float32))
+    self._compiled, _, _ = _compile(jax.jit(jnp.matmul), *self._args)
+    self.samples: list[float] = []
+
+  def __call__(self):
+    return self._compiled(*self._args)
+
+  def rate(self, timing: dict[str, Any]) -> dict[str, Any]:
+    """GFLOP/s of a ``time_calls`` summary of this matmul (recorded)."""
+    rates = [self.flops / s / 1e9 for s in timing["all_s"]]
+    self.samples += rates
+    return {"median_gflops": statistics.median(rates),
+            "max_gflops": max(rates), "repeats": len(rates)}
+
+  def summary(self) -> dict[str, Any]:
+    return {"size": self.size, "flops": self.flops,
+            "median_gflops": statistics.median(self.samples),
+            "max_gflops": max(self.samples),
+            "min_gflops": min(self.samples), "samples": len(self.samples)}
 
 
 # ---------------------------------------------------------------- inputs ---
@@ -388,7 +403,7 @@ def train_step_fn(model, tx, radius: float):
                             moving, senders, receivers, context, radius)
     loss, grads = jax.value_and_grad(loss_fn)(state.params)
     updates, opt_state = tx.update(grads, state.opt_state, state.params)
-    params = jax.tree.map(lambda p, u: p + u, state.params, updates)
+    params = optax.apply_updates(state.params, updates)
     return state.replace(step=state.step + 1, params=params,
                          opt_state=opt_state), loss
   return jax.jit(step, donate_argnums=0)
@@ -460,18 +475,13 @@ def _row_flops(row: dict, runner: _Runner) -> None:
                                     row["train_step"]["median_s"])
 
 
-def add_matmul_fractions(results: dict, matmul: float) -> None:
-  """Achieved GFLOP/s as fractions of the run's matmul rate (item 3)."""
-  for row in results["steps"]:
-    for key in ("forward_gflops_dense", "forward_gflops_xla",
-                "train_gflops_xla"):
-      if key in row:
-        row[key.replace("gflops", "matmul_fraction")] = _fraction(
-            row[key], matmul)
-  for key in ("split", "concat"):
-    v = results["split"][key]
-    v["forward_matmul_fraction_dense"] = _fraction(v["forward_gflops_dense"],
-                                                   matmul)
+def _add_fractions(row: dict, matmul: float) -> None:
+  """Achieved GFLOP/s as fractions of the interleaved matmul rate."""
+  for key in ("forward_gflops_dense", "forward_gflops_xla",
+              "train_gflops_xla"):
+    if key in row:
+      row[key.replace("gflops", "matmul_fraction")] = _fraction(row[key],
+                                                                matmul)
 
 
 def _model_info(name: str, config) -> dict[str, Any]:
@@ -483,10 +493,11 @@ def _model_info(name: str, config) -> dict[str, Any]:
           "split_first_layer": m.split_first_layer}
 
 
-def measure_model(name: str, g: BenchGraph, sizes: Sizes,
+def measure_model(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
                   log: Callable[[str], None], *, train_step: bool = True,
                   padded: bool = False) -> dict[str, Any]:
-  """Item 1: forward (and training) step of one model on one graph."""
+  """Items 1 and 3: forward (and training) step of one model on one graph,
+  interleaved with the reference matmul."""
   config = load_config(name)
   runner = _Runner(config, g, padded=padded)
   runner.compile_forward()
@@ -495,31 +506,40 @@ def measure_model(name: str, g: BenchGraph, sizes: Sizes,
          "n_edges_computed": runner.n_edges_computed, "padded": padded,
          "n_params": int(sum(x.size for x in jax.tree.leaves(runner.params))),
          "compile_s": {"forward": runner.fwd_compile_s}}
-  row["forward"] = time_calls({"f": runner.forward},
-                              sizes.forward_repeats)["f"]
+  calls = {"forward": runner.forward}
+  if train_step:
+    runner.compile_train()
+    row["compile_s"]["train_step"] = runner.train_compile_s
+    calls["train_step"] = runner.train_step
+  calls["matmul"] = matmul
+  times = time_calls(calls, sizes.repeats)
+  row["forward"] = times["forward"]
+  row["matmul"] = matmul.rate(times["matmul"])
   label = (f"{name} model on {g.name} ({g.n_nodes} nodes, "
            f"{runner.n_edges_computed} edges"
            + (", padded capacity" if padded else "") + ")")
   log(f"{label}: forward step {row['forward']['median_s']:.3f} s (features "
-      f"+ model, graph precomputed; median of {sizes.forward_repeats}, min "
+      f"+ model, graph precomputed; median of {sizes.repeats}, min "
       f"{row['forward']['min_s']:.3f}; compile {runner.fwd_compile_s:.1f} s "
       "excluded)")
   if train_step:
-    runner.compile_train()
-    row["compile_s"]["train_step"] = runner.train_compile_s
-    row["train_step"] = time_calls({"t": runner.train_step},
-                                   sizes.train_repeats)["t"]
+    row["train_step"] = times["train_step"]
     row["train_over_forward"] = (row["train_step"]["median_s"] /
                                  row["forward"]["median_s"])
     log(f"{label}: training step {row['train_step']['median_s']:.3f} s "
-        "(loss + grad + clip + Adam; median of "
-        f"{sizes.train_repeats}, min {row['train_step']['min_s']:.3f}; "
-        f"compile {runner.train_compile_s:.1f} s excluded)")
+        f"(loss + grad + clip + Adam; median of {sizes.repeats}, min "
+        f"{row['train_step']['min_s']:.3f}; compile "
+        f"{runner.train_compile_s:.1f} s excluded)")
   _row_flops(row, runner)
+  _add_fractions(row, row["matmul"]["median_gflops"])
   log(f"{label}: {row['flops']['forward_dense']['total'] / 1e9:.2f} GFLOP "
       "in dense layers per forward (XLA counts "
       f"{_gflop(runner.fwd_xla_flops)}) -> "
-      f"{row['forward_gflops_dense']:.1f} GFLOP/s achieved")
+      f"{row['forward_gflops_dense']:.1f} GFLOP/s = "
+      f"{_pct(row['forward_matmul_fraction_dense'])} of the "
+      f"{row['matmul']['median_gflops']:.1f} GFLOP/s of "
+      f"{matmul.size}^2 matmuls interleaved with it (target "
+      f"{_pct(TARGET_MATMUL_FRACTION)})")
   return row
 
 
@@ -527,8 +547,8 @@ def compare_peers(row: dict) -> dict[str, Any]:
   """Item 2: our paper-model times on the sand block against the quoted
   peers' (ratio < 1: we are faster)."""
   out = {"quoted_from": os.path.join(SAND_BLOCK_DIR, "README.md"),
-         "note": "peer times quoted, not re-run; measured earlier on this "
-                 "machine's kind with 2 CPU threads",
+         "note": "measured there with 2 CPU threads, latent 128, 10 "
+                 "message-passing steps, two hidden layers, batch 1",
          "target_ratio_to_reference": TARGET_PEER_RATIO,
          "reference": REFERENCE_PEER, "peers": {}}
   for peer, p in PEERS.items():
@@ -545,9 +565,11 @@ def compare_peers(row: dict) -> dict[str, Any]:
   return out
 
 
-def measure_split(name: str, g: BenchGraph, sizes: Sizes,
+def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
                   log: Callable[[str], None]) -> dict[str, Any]:
-  """Item 4: split first edge layer vs the concatenated form, interleaved."""
+  """Items 4 and 5: split first edge layer vs the concatenated form (same
+  function), all four programs and the matmul interleaved; then where each
+  program spends its time (``op_profile``)."""
   config = load_config(name)
   split_cfg = load_config(name)
   split_cfg.model.split_first_layer = True
@@ -562,10 +584,14 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes,
   out = {"model": _model_info(name, config), "scene": g.name,
          "n_nodes": g.n_nodes, "n_edges": g.n_edges,
          "max_abs_output_diff": diff}
-  fwd = time_calls({"split": split.forward, "concat": concat.forward},
-                   sizes.forward_repeats)
-  trn = time_calls({"split": split.train_step, "concat": concat.train_step},
-                   sizes.train_repeats)
+  times = time_calls({"split_forward": split.forward,
+                      "concat_forward": concat.forward,
+                      "split_train_step": split.train_step,
+                      "concat_train_step": concat.train_step,
+                      "matmul": matmul}, sizes.repeats)
+  out["matmul"] = matmul.rate(times["matmul"])
+  fwd = {k: times[f"{k}_forward"] for k in ("split", "concat")}
+  trn = {k: times[f"{k}_train_step"] for k in ("split", "concat")}
   for key, runner in (("split", split), ("concat", concat)):
     dense = runner.dense_flops()
     out[key] = {"forward": fwd[key], "train_step": trn[key],
@@ -577,19 +603,21 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes,
                                               fwd[key]["median_s"]),
                 "compile_s": {"forward": runner.fwd_compile_s,
                               "train_step": runner.train_compile_s}}
+    out[key]["forward_matmul_fraction_dense"] = _fraction(
+        out[key]["forward_gflops_dense"], out["matmul"]["median_gflops"])
   out["forward_speedup"] = (fwd["concat"]["median_s"] /
                             fwd["split"]["median_s"])
   out["train_step_speedup"] = (trn["concat"]["median_s"] /
                                trn["split"]["median_s"])
   out["processor_flops_ratio"] = (out["concat"]["processor_flops"] /
                                   out["split"]["processor_flops"])
+  out["processor_flops_saved"] = (out["concat"]["processor_flops"] -
+                                  out["split"]["processor_flops"])
   if out["split"]["xla_forward_flops"] and out["concat"]["xla_forward_flops"]:
     out["xla_forward_flops_saved"] = (out["concat"]["xla_forward_flops"] -
                                       out["split"]["xla_forward_flops"])
     out["xla_forward_flops_ratio"] = (out["concat"]["xla_forward_flops"] /
                                       out["split"]["xla_forward_flops"])
-  out["processor_flops_saved"] = (out["concat"]["processor_flops"] -
-                                  out["split"]["processor_flops"])
   out["target_speedup"] = TARGET_SPLIT_SPEEDUP
   out["forward_target_met"] = out["forward_speedup"] >= TARGET_SPLIT_SPEEDUP
   out["train_step_target_met"] = (out["train_step_speedup"] >=
@@ -599,117 +627,32 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes,
       f"{fwd['split']['median_s']:.3f} s vs {fwd['concat']['median_s']:.3f} s"
       f" ({out['forward_speedup']:.2f}x), training step "
       f"{trn['split']['median_s']:.3f} s vs {trn['concat']['median_s']:.3f} s"
-      f" ({out['train_step_speedup']:.2f}x); processor FLOPs "
+      f" ({out['train_step_speedup']:.2f}x; target "
+      f"{TARGET_SPLIT_SPEEDUP}x); processor FLOPs "
       f"{out['split']['processor_flops'] / 1e9:.2f} G vs "
       f"{out['concat']['processor_flops'] / 1e9:.2f} G "
       f"({out['processor_flops_ratio']:.2f}x); XLA forward FLOPs "
       f"{_gflop(out['split']['xla_forward_flops'])} G vs "
       f"{_gflop(out['concat']['xla_forward_flops'])} G")
-  return out
 
-
-# -------------------------------------------------------------- anatomy ---
-
-
-def _layer_norm(x):
-  mean = jnp.mean(x, -1, keepdims=True)
-  var = jnp.mean((x - mean)**2, -1, keepdims=True)
-  return (x - mean) * jax.lax.rsqrt(var + 1e-6)
-
-
-def measure_anatomy(name: str, g: BenchGraph, sizes: Sizes,
-                    forward_s: float | None, log: Callable[[str], None]
-                    ) -> dict[str, Any]:
-  """Item 5: the parts of one message-passing step, timed on their own.
-
-  Stand-ins with the model's shapes (split form): the edge MLP's dense
-  layers on [E, L] (first layer as W_e e + s + r), the two [N, L] -> [E, L]
-  gathers, the [E, L] -> [N, L] segment sum of messages at the receivers (as
-  jraph calls it, and told that the receivers are sorted), the node side
-  (two projections and the node MLP), and, for training, the gathers'
-  transpose (a scatter-add into the nodes).
-  """
-  config = load_config(name)
-  l, hl = config.model.latent_size, config.model.hidden_layers
-  steps = config.model.num_message_passing_steps
-  n, e = g.n_nodes, g.n_edges
-  senders, receivers = jnp.asarray(g.senders), jnp.asarray(g.receivers)
-  sorted_receivers = bool(np.all(np.diff(g.receivers) >= 0))
-  keys = jax.random.split(jax.random.key(1), 8)
-  h = jax.random.normal(keys[0], (n, l))
-  edges = jax.random.normal(keys[1], (e, l))
-  w = [jax.random.normal(k, (l, l)) / np.sqrt(l) for k in keys[2:5]]
-  b = jnp.zeros((1, l))
-  w_node = jax.random.normal(keys[5], (2 * l, l)) / np.sqrt(2 * l)
-
-  def mlp(x, first):
-    x = jax.nn.relu(first + b)
-    for k in range(hl):
-      x = x @ w[min(k + 1, 2)] + b
-      if k < hl - 1:
-        x = jax.nn.relu(x)
-    return _layer_norm(x)
-
-  def edge_dense(e_, gs, gr):
-    return e_ + mlp(e_, e_ @ w[0] + gs + gr)
-
-  def gathers(hs, hr):
-    return hs[senders], hr[receivers]
-
-  def segment_sum(x):
-    return jax.ops.segment_sum(x, receivers, n)
-
-  def segment_sum_sorted(x):
-    return jax.ops.segment_sum(x, receivers, n, indices_are_sorted=True)
-
-  def node_side(h_, agg):
-    proj = h_ @ w[1], h_ @ w[2]
-    x = jnp.concatenate([h_, agg], -1) @ w_node
-    return h_ + mlp(h_, x), proj
-
-  def gathers_transpose(cs, cr):
-    return jax.vjp(gathers, h, h)[1]((cs, cr))
-
-  parts = {
-      "edge_dense": (edge_dense, (edges, edges, edges),
-                     _mlp_flops(e, [l] * (hl + 2)) + 0),
-      "gathers": (gathers, (h, h), 0),
-      "segment_sum": (segment_sum, (edges,), 0),
-      "segment_sum_sorted": (segment_sum_sorted, (edges,), 0),
-      "node_side": (node_side, (h, h),
-                    _mlp_flops(n, [2 * l] + [l] * (hl + 1)) +
-                    2 * _mlp_flops(n, [l, l])),
-      "gathers_transpose": (gathers_transpose, (edges, edges), 0),
-  }
-  compiled = {}
-  for key, (fn, args, _) in parts.items():
-    c, _, _ = _compile(jax.jit(fn), *args)
-    compiled[key] = functools.partial(c, *args)
-  times = time_calls(compiled, sizes.anatomy_repeats)
-  out = {"model": name, "scene": g.name, "n_nodes": n, "n_edges": e,
-         "latent_size": l, "steps": steps,
-         "receivers_sorted": sorted_receivers, "parts": {}}
-  forward_parts = ("edge_dense", "gathers", "segment_sum", "node_side")
-  per_step = sum(times[k]["median_s"] for k in forward_parts)
-  out["forward_parts_per_step_s"] = per_step
-  out["forward_parts_x_steps_s"] = per_step * steps
-  out["measured_forward_s"] = forward_s
-  for key, (_, _, flops) in parts.items():
-    t = times[key]
-    out["parts"][key] = {
-        **t, "ms": t["median_s"] * 1e3,
-        "x_steps_s": t["median_s"] * steps,
-        "share_of_forward": (t["median_s"] * steps / forward_s
-                             if forward_s else None),
-        "flops": flops or None,
-        "gflops": flops / t["median_s"] / 1e9 if flops else None}
-    log(f"anatomy ({name} on {g.name}, one step of {steps}): {key} "
-        f"{t['median_s'] * 1e3:.2f} ms (median of {sizes.anatomy_repeats}"
-        + (f"; {flops / t['median_s'] / 1e9:.1f} GFLOP/s" if flops else "")
-        + ")")
-  log(f"anatomy: forward parts x {steps} steps = "
-      f"{out['forward_parts_x_steps_s']:.3f} s"
-      + (f" of the measured {forward_s:.3f} s forward" if forward_s else ""))
+  out["profile"] = {}
+  for key, runner in (("split", split), ("concat", concat)):
+    for program, compiled, call, flops in (
+        ("forward", runner.fwd, runner.forward,
+         runner.dense_flops()["total"]),
+        ("train_step", runner.step, runner.train_step, None)):
+      p = op_profile.breakdown(compiled, call, sizes.profile_repeats)
+      out["profile"][f"{key}_{program}"] = p
+      if "skipped" in p:
+        log(f"profile of the {key} {program}: skipped ({p['skipped']})")
+        continue
+      if flops:
+        p["dense_gflops"] = _rate(flops, p["seconds"]["dense"])
+      log(f"profile of the {key} {program} ({name} on {g.name}; operation "
+          f"time {p['total_s']:.3f} s): " + ", ".join(
+              f"{k} {100 * v:.0f}%" for k, v in p["share"].items())
+          + (f"; dense layers run at {p['dense_gflops']:.1f} GFLOP/s"
+             if flops else ""))
   return out
 
 
@@ -769,16 +712,19 @@ def to_markdown(results: dict[str, Any]) -> str:
       "Training step: `simulator.loss`, its gradient, clipping and Adam "
       "(`train.create_optimizer`), batch 1, state donated; no noise. "
       "GFLOP/s: the dense layers' FLOPs (`models.processor_flops` + "
-      "encoders + decoder) per second.", "",
+      "encoders + decoder) per second. Each row's forward, training step "
+      f"and a jitted {mm['size']}x{mm['size']} float32 matmul (the "
+      "machine's reference rate) ran interleaved, one call of each per "
+      "round.", "",
       f"Matmul rate of this machine in this run: "
-      f"**{mm['median_gflops']:.1f} GFLOP/s** (median of jitted "
-      f"{mm['size']}x{mm['size']} float32 matmuls; "
-      f"{mm['start']['median_gflops']:.1f} at the start, "
-      f"{mm['end']['median_gflops']:.1f} at the end).", "",
+      f"**{mm['median_gflops']:.1f} GFLOP/s** (median of {mm['samples']} "
+      f"matmuls; from {mm['min_gflops']:.1f} to {mm['max_gflops']:.1f}).",
+      "",
       "## Forward and training step", "",
       "| model | scene | nodes | edges | forward s | training step s | "
-      "train/forward | forward GFLOP/s | of matmul rate |",
-      "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+      "train/forward | forward GFLOP/s | matmul GFLOP/s beside it | "
+      "forward / matmul rate |",
+      "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
   for r in results["steps"]:
     m = r["model"]
     name = (f"{m['config']} (L={m['latent_size']}, M="
@@ -793,9 +739,16 @@ def to_markdown(results: dict[str, Any]) -> str:
         f"{r['forward']['median_s']:.3f} ({r['forward']['min_s']:.3f}) | "
         f"{train_s} | {_fmt(r.get('train_over_forward'), '.2f', '-')} | "
         f"{_fmt(r['forward_gflops_dense'], '.1f')} | "
+        f"{r['matmul']['median_gflops']:.1f} | "
         f"{_pct(r['forward_matmul_fraction_dense'])} |")
   lines += ["", f"Target: forward at least {_pct(TARGET_MATMUL_FRACTION)} "
-            "of the matmul rate. FLOPs per forward (dense layers / XLA "
+            "of the matmul rate: " + ", ".join(
+                f"{r['model']['config']} on {r['scene']}"
+                + (" (padded)" if r["padded"] else "") + " "
+                + _met(r["forward_matmul_fraction_dense"] >=
+                       TARGET_MATMUL_FRACTION)
+                for r in results["steps"]) + ".", "",
+            "FLOPs per forward (dense layers / XLA "
             "cost analysis of the jitted forward / XLA of the training "
             "step), GFLOP:", ""]
   for r in results["steps"]:
@@ -813,8 +766,9 @@ def to_markdown(results: dict[str, Any]) -> str:
     lines += [
         "## Against public GNS implementations (paper model, sand block, "
         "batch 1)", "",
-        f"Peer times quoted from `{p['quoted_from']}` ({p['note']}), not "
-        "re-run. Ratio = ours / theirs (below 1: we are faster). "
+        f"Peer times quoted from `{p['quoted_from']}` ({p['note']}); not "
+        "re-run here, so their load differs from this run's. Ratio = ours / "
+        "theirs (below 1: we are faster). "
         f"Target: at most {TARGET_PEER_RATIO}x {p['reference']}.", "",
         "| implementation | forward s | training step s | our forward / "
         "theirs | our training step / theirs |",
@@ -841,8 +795,10 @@ def to_markdown(results: dict[str, Any]) -> str:
       f"model, {s['scene']}, {s['n_nodes']} nodes, {s['n_edges']} edges)",
       "",
       "Same function (concatenated parameters mapped from the split ones; "
-      f"outputs agree to {s['max_abs_output_diff']:.2g}), timed "
-      "interleaved.", "",
+      f"outputs agree to {s['max_abs_output_diff']:.2g}); the four "
+      "programs and the matmul "
+      f"({s['matmul']['median_gflops']:.1f} GFLOP/s) timed interleaved.",
+      "",
       "| form | forward s | training step s | processor GFLOP | XLA forward "
       "GFLOP | XLA training GFLOP | forward GFLOP/s |",
       "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
@@ -869,30 +825,33 @@ def to_markdown(results: dict[str, Any]) -> str:
                f"({s['xla_forward_flops_ratio']:.2f}x fewer)"
                if "xla_forward_flops_saved" in s else "") + ".", ""]
 
-  a = results["anatomy"]
+  prof = s["profile"]
   lines += [
-      f"## Anatomy of one message-passing step ({a['model']} model, "
-      f"{a['scene']}: {a['n_nodes']} nodes, {a['n_edges']} edges, L = "
-      f"{a['latent_size']})", "",
-      "Each part jitted and timed on its own with the model's shapes "
-      f"(x {a['steps']} steps = the processor's share); receivers sorted: "
-      f"{a['receivers_sorted']}.", "",
-      "| part | ms per step | x steps (s) | of the forward | GFLOP/s |",
-      "| --- | ---: | ---: | ---: | ---: |"]
-  labels = {
-      "edge_dense": "edge MLP dense layers + LayerNorm [E, L]",
-      "gathers": "gathers (W_s h)[senders], (W_r h)[receivers]",
-      "segment_sum": "segment_sum of messages at receivers (as jraph)",
-      "segment_sum_sorted": "same, indices_are_sorted=True",
-      "node_side": "node projections + node MLP [N, 2L]",
-      "gathers_transpose": "gathers' transpose (backward: scatter-add)"}
-  for key, v in a["parts"].items():
-    lines.append(f"| {labels[key]} | {v['ms']:.2f} | {v['x_steps_s']:.3f} | "
-                 f"{_pct(v['share_of_forward'])} | "
-                 f"{_fmt(v['gflops'], '.1f', '-')} |")
-  lines += ["", f"Forward parts (first four rows) x {a['steps']} steps: "
-            f"{a['forward_parts_x_steps_s']:.3f} s; measured forward "
-            f"{_fmt(a['measured_forward_s'])} s.", ""]
+      f"## Where the time goes ({s['model']['config']} model, "
+      f"{s['scene']})", "",
+      "Operation time under `jax.profiler`, summed by kind over the "
+      "optimised HLO's operations (`experiments/op_profile.py`): dense = "
+      "dots with their fused bias/activation; gather = gathers and the "
+      "elementwise work fused with them; scatter = segment sums and "
+      "gathers' transposes; reduce = LayerNorm statistics, bias gradients; "
+      "elementwise = other fusions and copies. Shares of the summed "
+      "operation time (seconds per call in brackets).", "",
+      "| program | " + " | ".join(op_profile.KINDS) + " | total s |",
+      "| --- |" + " ---: |" * (len(op_profile.KINDS) + 1)]
+  for key, v in prof.items():
+    label = key.replace("_", " ", 1).replace("_", " ")
+    if "skipped" in v:
+      lines.append(f"| {label} | skipped: {v['skipped']} |")
+      continue
+    lines.append(f"| {label} | " + " | ".join(
+        f"{_pct(v['share'][k])} ({v['seconds'][k]:.3f})"
+        for k in op_profile.KINDS) + f" | {v['total_s']:.3f} |")
+  dense = [f"{k.split('_')[0]} {v['dense_gflops']:.1f} GFLOP/s"
+           for k, v in prof.items() if v.get("dense_gflops")]
+  if dense:
+    lines += ["", "Dense layers of the forward, counted FLOPs over the time "
+              "of the dot operations alone: " + ", ".join(dense) + "."]
+  lines.append("")
   return "\n".join(lines)
 
 
@@ -902,6 +861,7 @@ def _write_atomic(path: str, text: str) -> None:
                                    suffix=".tmp") as f:
     f.write(text)
     tmp = f.name
+  os.chmod(tmp, 0o644)
   os.replace(tmp, path)
 
 
@@ -930,10 +890,7 @@ def run_benchmark(out_dir: str, quick: bool = False,
   sizes = QUICK if quick else FULL
   results: dict[str, Any] = {"environment": _environment(quick),
                              "sizes": dataclasses.asdict(sizes)}
-  start = measure_matmul(sizes.matmul_size, sizes.matmul_repeats)
-  log(f"matmul rate (start): {start['median_gflops']:.1f} GFLOP/s (median of "
-      f"{sizes.matmul_repeats} jitted {sizes.matmul_size}^2 float32 "
-      "matmuls)")
+  matmul = Matmul(sizes.matmul_size)
   sand = load_sand_block(sand_block_dir)
   log(f"sand block: {sand.n_nodes} particles, {sand.n_edges} edges at R = "
       f"{sand.radius} (checked: {SAND_BLOCK_EDGES})")
@@ -950,9 +907,9 @@ def run_benchmark(out_dir: str, quick: bool = False,
   steps = []
   for name in sizes.models:
     for g in (sand, scene):
-      steps.append(measure_model(name, g, sizes, log))
+      steps.append(measure_model(name, g, sizes, matmul, log))
   if sizes.padded_row:
-    steps.append(measure_model(sizes.split_model, sand, sizes, log,
+    steps.append(measure_model(sizes.split_model, sand, sizes, matmul, log,
                                train_step=False, padded=True))
   results["steps"] = steps
   paper_rows = [r for r in steps if r["model"]["config"] == "paper" and
@@ -969,25 +926,12 @@ def run_benchmark(out_dir: str, quick: bool = False,
         f"{TARGET_PEER_RATIO}: forward "
         f"{_met(results['peers']['forward_target_met'])}, training "
         f"{_met(results['peers']['train_step_target_met'])})")
-  results["split"] = measure_split(sizes.split_model, sand, sizes, log)
-  split_fwd = next((r["forward"]["median_s"] for r in steps
-                    if r["model"]["config"] == sizes.split_model and
-                    r["scene"] == "sand_block" and not r["padded"]), None)
-  results["anatomy"] = measure_anatomy(sizes.split_model, sand, sizes,
-                                       split_fwd, log)
-  end = measure_matmul(sizes.matmul_size, sizes.matmul_repeats)
-  log(f"matmul rate (end): {end['median_gflops']:.1f} GFLOP/s")
-  matmul = statistics.median(start["gflops_all"] + end["gflops_all"])
-  results["matmul"] = {"size": sizes.matmul_size, "start": start, "end": end,
-                       "median_gflops": matmul}
-  add_matmul_fractions(results, matmul)
-  for row in results["steps"]:
-    log(f"{row['model']['config']} model on {row['scene']}"
-        + (" (padded)" if row["padded"] else "") + ": forward at "
-        f"{row['forward_gflops_dense']:.1f} GFLOP/s = "
-        f"{_pct(row['forward_matmul_fraction_dense'])} of the run's "
-        f"{matmul:.1f} GFLOP/s matmul rate (target "
-        f"{_pct(TARGET_MATMUL_FRACTION)})")
+  results["split"] = measure_split(sizes.split_model, sand, sizes, matmul,
+                                   log)
+  results["matmul"] = matmul.summary()
+  log(f"matmul rate of this run: {results['matmul']['median_gflops']:.1f} "
+      f"GFLOP/s (median of {results['matmul']['samples']} jitted "
+      f"{sizes.matmul_size}^2 float32 matmuls, interleaved with the above)")
   results["environment"]["load_average_end"] = list(os.getloadavg())
 
   markdown = to_markdown(results)
