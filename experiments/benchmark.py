@@ -16,21 +16,29 @@ scene, against the quoted geoelements/gns and LagrangeBench times, the
 achieved FLOP rate against this machine's matmul rate, and the split first
 edge layer against the concatenated form. Writes ``gns_benchmark.json`` and
 ``gns_benchmark.md``.
+
+dataset (``experiments/dataset_benchmark.py``): wall time to generate 20 paper
+trajectories with 2 and 1 worker processes, extrapolated to the paper's 1100,
+and windows and padded batches read per second from ``--read_data``. Writes
+``dataset_benchmark.json`` and ``dataset_benchmark.md``.
 """
 
 from absl import app
 from absl import flags
 from absl import logging
 
+from experiments import dataset_benchmark
 from experiments import gns_benchmark
 from experiments import mpm_benchmark
+from experiments import runtime
 
-_BENCHMARKS = ("mpm", "gns")
+_BENCHMARKS = ("mpm", "gns", "dataset")
 
 _OUT = flags.DEFINE_string("out", "docs/benchmarks",
                            "Directory for the JSON and Markdown results.")
-_WHAT = flags.DEFINE_list("what", list(_BENCHMARKS),
-                          "Benchmarks to run, comma-separated: mpm, gns.")
+_WHAT = flags.DEFINE_list("what", ["mpm", "gns"],
+                          "Benchmarks to run, comma-separated: mpm, gns, "
+                          "dataset.")
 _QUICK = flags.DEFINE_bool("quick", False,
                            "Tiny sizes (seconds): a smoke test, not figures.")
 _TAICHI = flags.DEFINE_bool("taichi", True,
@@ -41,6 +49,9 @@ _TAICHI_THREADS = flags.DEFINE_integer(
 _SAND_BLOCK_DIR = flags.DEFINE_string(
     "sand_block_dir", gns_benchmark.SAND_BLOCK_DIR,
     "gns: directory of sand_block_window.npz and sand_block_metadata.json.")
+
+_READ_DATA = flags.DEFINE_string(
+    "read_data", None, "dataset: a dataset directory to time reading on.")
 
 flags.register_validator(
     "what", lambda v: bool(v) and set(v) <= set(_BENCHMARKS),
@@ -63,6 +74,11 @@ def main(argv):
         sand_block_dir=_SAND_BLOCK_DIR.value)
     print(results["markdown"])
     print("Wrote " + ", ".join(results["files"]))
+  if "dataset" in what:
+    results = dataset_benchmark.run_benchmark(
+        _OUT.value, read_data=_READ_DATA.value, quick=_QUICK.value,
+        cache=runtime.enable_compilation_cache(), log=logging.info)
+    print(results["markdown"])
 
 
 if __name__ == "__main__":
