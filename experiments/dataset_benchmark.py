@@ -12,15 +12,15 @@
 Writes ``dataset_benchmark.json`` and ``.md`` to ``out_dir``.
 """
 
-import datetime
+import json
 import os
-import platform
 import tempfile
 import time
 
 from gnsjax import batching
 from gnsjax import data
 from gnsjax import graph
+from experiments import benchlib
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -72,9 +72,9 @@ def run_benchmark(out_dir: str, read_data: str | None = None,
                              num_test=1 if quick else 4,
                              num_frames=20 if quick else 600,
                              spacing=0.01 if quick else 0.005)
-  results = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(),
-             "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
-             "spec": dict(spec.__dict__), "generation": []}
+  env = benchlib.environment(quick)
+  results = {"environment": env, "spec": dict(spec.__dict__),
+             "generation": []}
   for workers in (2, 1):
     r = time_generation(spec, workers, cache)
     log(f"generate {r['trajectories']} trajectories with {workers} "
@@ -89,7 +89,8 @@ def run_benchmark(out_dir: str, read_data: str | None = None,
   g2, g1 = results["generation"]
   lines = [
       "## Dataset generation and reading", "",
-      f"{results['date']}, {results['machine']}.", "",
+      f"{env['date']}, {env['machine']}, {env['cpu_count']} CPUs, load "
+      f"{env['load_average_start'][0]:.1f} at the start.", "",
       "| workers | trajectories | wall (s) | simulation (s) | per trajectory "
       "(s) | 1100 trajectories (min) |", "|---|---|---|---|---|---|"]
   for r in results["generation"]:
@@ -106,8 +107,8 @@ def run_benchmark(out_dir: str, read_data: str | None = None,
               f"{r['batch_size']} windows/s."]
   results["markdown"] = "\n".join(lines) + "\n"
   name = "dataset_benchmark_quick" if quick else "dataset_benchmark"
-  mpm_io.write_json(os.path.join(out_dir, f"{name}.json"),
-                    {k: v for k, v in results.items() if k != "markdown"})
-  with open(os.path.join(out_dir, f"{name}.md"), "w") as f:
-    f.write(results["markdown"])
+  benchlib.write_atomic(os.path.join(out_dir, f"{name}.json"), json.dumps(
+      {k: v for k, v in results.items() if k != "markdown"}, indent=1))
+  benchlib.write_atomic(os.path.join(out_dir, f"{name}.md"),
+                        results["markdown"])
   return results

@@ -45,13 +45,10 @@ round, so that load from other processes falls on all of them alike.
 """
 
 import dataclasses
-import datetime
 import importlib
 import json
 import os
-import platform
 import statistics
-import tempfile
 import time
 from typing import Any, Callable, Sequence
 
@@ -60,6 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from experiments import benchlib
 from experiments import op_profile
 from gnsjax import features
 from gnsjax import graph
@@ -659,22 +657,6 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
 # ---------------------------------------------------------------- output ---
 
 
-def _environment(quick: bool) -> dict[str, Any]:
-  return {
-      "date": datetime.datetime.now(datetime.timezone.utc).isoformat(
-          timespec="seconds"),
-      "quick": quick,
-      "python": platform.python_version(),
-      "machine": platform.machine(), "platform": platform.platform(),
-      "cpu_count": os.cpu_count(),
-      "jax_version": jax.__version__,
-      "jax_backend": jax.default_backend(),
-      "jax_devices": [str(d) for d in jax.devices()],
-      "xla_flags": os.environ.get("XLA_FLAGS", ""),
-      "load_average_start": list(os.getloadavg()),
-  }
-
-
 def _fmt(v, spec=".3f", none="n/a"):
   return none if v is None else format(v, spec)
 
@@ -855,16 +837,6 @@ def to_markdown(results: dict[str, Any]) -> str:
   return "\n".join(lines)
 
 
-def _write_atomic(path: str, text: str) -> None:
-  directory = os.path.dirname(os.path.abspath(path))
-  with tempfile.NamedTemporaryFile("w", dir=directory, delete=False,
-                                   suffix=".tmp") as f:
-    f.write(text)
-    tmp = f.name
-  os.chmod(tmp, 0o644)
-  os.replace(tmp, path)
-
-
 def _json_default(v):
   if isinstance(v, (np.floating, np.integer, np.bool_)):
     return v.item()
@@ -888,7 +860,7 @@ def run_benchmark(out_dir: str, quick: bool = False,
     The results (the JSON's content) with the Markdown under "markdown".
   """
   sizes = QUICK if quick else FULL
-  results: dict[str, Any] = {"environment": _environment(quick),
+  results: dict[str, Any] = {"environment": benchlib.environment(quick),
                              "sizes": dataclasses.asdict(sizes)}
   matmul = Matmul(sizes.matmul_size)
   sand = load_sand_block(sand_block_dir)
@@ -937,9 +909,9 @@ def run_benchmark(out_dir: str, quick: bool = False,
   markdown = to_markdown(results)
   os.makedirs(out_dir, exist_ok=True)
   stem = os.path.join(out_dir, "gns_benchmark" + ("_quick" if quick else ""))
-  _write_atomic(stem + ".json",
+  benchlib.write_atomic(stem + ".json",
                 json.dumps(results, indent=1, default=_json_default) + "\n")
-  _write_atomic(stem + ".md", markdown)
+  benchlib.write_atomic(stem + ".md", markdown)
   results["markdown"] = markdown
   results["files"] = [stem + ".json", stem + ".md"]
   return results

@@ -25,13 +25,10 @@ skipped with a message and the rest runs.
 """
 
 import dataclasses
-import datetime
 import importlib
 import json
 import os
-import platform
 import statistics
-import tempfile
 import time
 from typing import Any, Callable, Sequence
 
@@ -41,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import mpm
+from experiments import benchlib
 
 # The paper scene of the benchmark: default heap of 1000 particles.
 PAPER_SCENE = {"name": "paper_semicircle",
@@ -392,22 +390,6 @@ def measure_batches(sizes: Sizes, log: Callable[[str], None]) -> dict:
 # ---------------------------------------------------------------- output ---
 
 
-def _environment(peer: _Peer, quick: bool) -> dict[str, Any]:
-  return {
-      "date": datetime.datetime.now(datetime.timezone.utc).isoformat(
-          timespec="seconds"),
-      "quick": quick,
-      "python": platform.python_version(),
-      "machine": platform.machine(), "platform": platform.platform(),
-      "cpu_count": os.cpu_count(),
-      "jax_version": jax.__version__,
-      "jax_backend": jax.default_backend(),
-      "jax_devices": [str(d) for d in jax.devices()],
-      "taichi": peer.info if peer.available else {"skipped": peer.reason},
-      "load_average_start": list(os.getloadavg()),
-  }
-
-
 def _fmt(v, spec=".1f", none="n/a"):
   return none if v is None else format(v, spec)
 
@@ -500,15 +482,6 @@ def to_markdown(results: dict[str, Any]) -> str:
   return "\n".join(lines)
 
 
-def _write_atomic(path: str, text: str) -> None:
-  directory = os.path.dirname(os.path.abspath(path))
-  with tempfile.NamedTemporaryFile("w", dir=directory, delete=False,
-                                   suffix=".tmp") as f:
-    f.write(text)
-    tmp = f.name
-  os.replace(tmp, path)
-
-
 def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
                   taichi_threads: int | None = None,
                   log: Callable[[str], None] = logging.info
@@ -529,7 +502,8 @@ def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
   peer = _Peer(taichi, taichi_threads)
   if not peer.available:
     log(f"Taichi peer skipped: {peer.reason}")
-  results: dict[str, Any] = {"environment": _environment(peer, quick),
+  results: dict[str, Any] = {"environment": benchlib.environment(
+      quick, taichi=peer.info if peer.available else {"skipped": peer.reason}),
                              "sizes": dataclasses.asdict(sizes)}
   paper = mpm.setup(mpm.Scene.from_dict(
       {**PAPER_SCENE, "num_frames": sizes.trajectory_frames}))
@@ -543,8 +517,8 @@ def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
   markdown = to_markdown(results)
   os.makedirs(out_dir, exist_ok=True)
   stem = os.path.join(out_dir, "mpm_benchmark" + ("_quick" if quick else ""))
-  _write_atomic(stem + ".json", json.dumps(results, indent=1) + "\n")
-  _write_atomic(stem + ".md", markdown)
+  benchlib.write_atomic(stem + ".json", json.dumps(results, indent=1) + "\n")
+  benchlib.write_atomic(stem + ".md", markdown)
   results["markdown"] = markdown
   results["files"] = [stem + ".json", stem + ".md"]
   return results
