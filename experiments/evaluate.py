@@ -18,6 +18,9 @@ _REPEATS = flags.DEFINE_integer("timing_repeats", 3,
                                 "Repeats of each Table 2 timing (median).")
 _CHECKPOINTS = flags.DEFINE_bool(
     "checkpoint_errors", True, "Also evaluate the named checkpoints (Fig. 5).")
+_CHECKPOINT_TRAJ = flags.DEFINE_integer(
+    "checkpoint_trajectories", None,
+    "Test trajectories per checkpoint for Fig. 5 (default: all evaluated).")
 
 
 def main(argv):
@@ -26,7 +29,8 @@ def main(argv):
   summary = evaluate.evaluate(_WORKDIR.value, _DATA.value, _OUT.value,
                               max_trajectories=_MAX.value,
                               timing_repeats=_REPEATS.value,
-                              checkpoint_errors=_CHECKPOINTS.value)
+                              checkpoint_errors=_CHECKPOINTS.value,
+                              checkpoint_trajectories=_CHECKPOINT_TRAJ.value)
   print(f"test MSE {summary['test_mse']:.3e} m^2; report: "
         f"{_OUT.value}/report.md")
 
