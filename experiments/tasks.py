@@ -121,7 +121,7 @@ def _ship_checkpoint(source: str, workdir: str) -> int:
   return steps[-1]
 
 
-def demo(out_dir: str, *, num_train: int = 4, num_test: int = 7,
+def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
          num_frames: int = 600, finetune_steps: int = 200,
          pretrained: str | None = PRETRAINED,
          workers: int = 2) -> dict[str, str]:
@@ -137,6 +137,7 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 7,
   """
   from gnsjax import evaluate as evaluate_lib  # pylint: disable=g-import-not-at-top
   from gnsjax import metrics  # pylint: disable=g-import-not-at-top
+  from gnsjax import rollout as rollout_lib  # pylint: disable=g-import-not-at-top
   from gnsjax import train  # pylint: disable=g-import-not-at-top
   from mpm import dataset  # pylint: disable=g-import-not-at-top
 
@@ -158,22 +159,26 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 7,
 
   _, problem, trainer, state, step = evaluate_lib.load_run(workdir, data_dir)
   c = config.train.input_frames
-  results = evaluate_lib.rollout_split(
-      trainer, state, problem, data.split_path(data_dir, "test"), c)
-  r = next(r for r in results if r["group"] == "triangle")
-  t = r["trajectory"]
+  t = next(t for t in data.trajectories(data.split_path(data_dir, "test"))
+           if dataset.group_of(t.scene.name) == "triangle")
+  predicted = rollout_lib.rollout_trajectory(
+      trainer.model, state.params, t, problem, len(t.positions) - c, c)
+  truth = t.positions[c:]
   v = t.positions[c - 1] - t.positions[c - 2]
   constant = t.positions[c - 1][None] + v[None] * np.arange(
-      1, len(r["truth"]) + 1)[:, None, None]
+      1, len(truth) + 1)[:, None, None]
+  mse = metrics.positional_mse(predicted, truth)
   result = {
       "scene": t.scene.name, "model_step": step, "fine_tuned_from": start,
-      "particles": int(t.positions.shape[1]), "steps": len(r["truth"]),
-      "gns_mean_mse_m2": float(np.mean(r["mse"])),
-      "gns_final_mse_m2": float(r["mse"][-1]),
+      "particles": int(t.positions.shape[1]), "steps": len(truth),
+      "gns_mean_mse_m2": float(np.mean(mse)),
+      "gns_final_mse_m2": float(mse[-1]),
       "constant_velocity_mean_mse_m2": float(np.mean(
-          metrics.positional_mse(constant, r["truth"]))),
-      "gns_final_runout_error_m": float(r["runout_error"][-1]),
-      "gns_deposit_error_m": r["deposit_error"],
+          metrics.positional_mse(constant, truth))),
+      "gns_final_runout_error_m": float(
+          metrics.runout_error(predicted, truth)[-1]),
+      "gns_deposit_error_m": metrics.deposit_error(
+          predicted[-1], truth[-1], 2 * t.scene.granular.spacing),
   }
   paths = {"data": data_dir, "run": workdir,
            "metrics": os.path.join(out_dir, "metrics.json"),
@@ -185,7 +190,7 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 7,
                                                                 "_std"))}
   mpm_io.write_trajectories(paths["truth"], [t], stats=stats)
   mpm_io.write_trajectories(paths["predicted"], [dataclasses.replace(
-      t, positions=np.concatenate([t.positions[:c], r["predicted"]]).astype(
+      t, positions=np.concatenate([t.positions[:c], predicted]).astype(
           np.float32))], stats=stats)
   paths["animation"], paths["frames"] = render_file(
       paths["truth"], out_dir, compare_path=paths["predicted"])
