@@ -3,11 +3,14 @@
   python -m experiments.evaluate --workdir=RUN --data=DATA --out=DIR
 """
 
+import os
+
 from absl import app
 from absl import flags
 
 from experiments import runtime
 from gnsjax import evaluate
+from mpm import io as mpm_io
 
 _WORKDIR = flags.DEFINE_string("workdir", None, "Training run directory.")
 _DATA = flags.DEFINE_string("data", None, "Dataset directory.")
@@ -18,6 +21,9 @@ _REPEATS = flags.DEFINE_integer("timing_repeats", 3,
                                 "Repeats of each Table 2 timing (median).")
 _CHECKPOINTS = flags.DEFINE_bool(
     "checkpoint_errors", True, "Also evaluate the named checkpoints (Fig. 5).")
+_BASELINE = flags.DEFINE_bool(
+    "baseline", False, "Only compare the model with a constant-velocity "
+    "baseline (one-step loss and 50-step rollouts on the test split).")
 _CHECKPOINT_TRAJ = flags.DEFINE_integer(
     "checkpoint_trajectories", None,
     "Test trajectories per checkpoint for Fig. 5 (default: all evaluated).")
@@ -26,6 +32,14 @@ _CHECKPOINT_TRAJ = flags.DEFINE_integer(
 def main(argv):
   del argv
   runtime.enable_compilation_cache()
+  if _BASELINE.value:
+    result = evaluate.constant_velocity_comparison(_WORKDIR.value, _DATA.value)
+    os.makedirs(_OUT.value, exist_ok=True)
+    mpm_io.write_json(os.path.join(_OUT.value, "baseline.json"), result)
+    for k, v in result.items():
+      if not isinstance(v, list):
+        print(f"{k}: {v:.6g}" if isinstance(v, float) else f"{k}: {v}")
+    return
   summary = evaluate.evaluate(_WORKDIR.value, _DATA.value, _OUT.value,
                               max_trajectories=_MAX.value,
                               timing_repeats=_REPEATS.value,

@@ -31,6 +31,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import mpm
+from gnsjax import batching
 from gnsjax import checkpoint
 from gnsjax import data
 from gnsjax import metrics
@@ -341,3 +342,56 @@ def report(summary: dict, per_trajectory: Sequence[dict]) -> str:
                  f"{r['mean_mse']:.2e} | {r['final_runout_error']:.4f} | "
                  f"{r['deposit_error']:.4f} |")
   return "\n".join(lines) + "\n"
+
+
+def constant_velocity_comparison(workdir: str, data_dir: str, *,
+                                 num_windows: int = 256,
+                                 rollout_steps: int = 50) -> dict[str, float]:
+  """The model against the constant-velocity baseline on the test split.
+
+  One-step: MSE of normalised acceleration on ``num_windows`` test windows
+  (no noise); constant velocity predicts zero acceleration. Rollouts:
+  positional MSE over the first ``rollout_steps`` steps of every test
+  trajectory.
+  """
+  config, problem, trainer, state, step = load_run(workdir, data_dir)
+  c = config.train.input_frames
+  test_path = data.split_path(data_dir, "test")
+  model_loss, baseline_loss = [], []
+  stats = problem.stats
+  with data.WindowDataset(test_path, input_frames=c, seed=1) as ds:
+    for k in range(0, num_windows, config.train.batch_size):
+      windows = [ds[k + i] for i in range(config.train.batch_size)]
+      batch = batching.make_batch(windows, problem.spec,
+                                  config.train.node_bucket)
+      arrays = trainer.batch_arrays(batch, None, noise=False)
+      model_loss.append(float(trainer.eval_loss(state.params, *arrays)))
+      inputs, target, _, moving = (np.asarray(a) for a in arrays[:4])
+      acc = target - 2 * inputs[:, -1] + inputs[:, -2]
+      want = (acc - np.asarray(stats.acc_mean)) / np.asarray(stats.acc_std)
+      zero_pred = -np.asarray(stats.acc_mean) / np.asarray(stats.acc_std)
+      err = np.sum((want - zero_pred)**2, -1) * moving
+      baseline_loss.append(float(np.mean(
+          err.sum(-1) / np.maximum(moving.sum(-1), 1) / 2)))
+  rollout_mse, constant_mse = [], []
+  for t in data.trajectories(test_path):
+    steps = min(rollout_steps, len(t.positions) - c)
+    pred = rollout_lib.rollout_trajectory(trainer.model, state.params, t,
+                                          problem, steps, c)
+    truth = t.positions[c:c + steps]
+    v = t.positions[c - 1] - t.positions[c - 2]
+    constant = t.positions[c - 1][None] + v[None] * np.arange(
+        1, steps + 1)[:, None, None]
+    rollout_mse.append(float(np.mean(metrics.positional_mse(pred, truth))))
+    constant_mse.append(float(np.mean(metrics.positional_mse(constant,
+                                                             truth))))
+  return {
+      "step": step, "windows": len(model_loss) * config.train.batch_size,
+      "trajectories": len(rollout_mse), "rollout_steps": rollout_steps,
+      "one_step_loss": float(np.mean(model_loss)),
+      "one_step_loss_constant_velocity": float(np.mean(baseline_loss)),
+      "rollout_mse_m2": float(np.mean(rollout_mse)),
+      "rollout_mse_constant_velocity_m2": float(np.mean(constant_mse)),
+      "rollout_mse_per_trajectory": rollout_mse,
+      "rollout_mse_constant_velocity_per_trajectory": constant_mse,
+  }
