@@ -58,6 +58,7 @@ import numpy as np
 import optax
 
 from experiments import benchlib
+from experiments import gns_report
 from experiments import op_profile
 from gnsjax import features
 from gnsjax import graph
@@ -77,23 +78,6 @@ SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
 PAPER_SCENE = {"name": "paper_semicircle",
                "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}]}
 INPUT_FRAMES = 6
-
-# Quoted from /work/shared/bench/README.md: measured on this machine's kind (2
-# CPU threads), latent 128, 10 message-passing steps, MLPs with two hidden
-# layers, batch 1, on the sand block window. Not re-run here.
-PEERS = {
-    "geoelements/gns": {"version": "PyTorch 2.13", "forward_s": 0.54,
-                        "train_step_s": 1.53},
-    "LagrangeBench": {"version": "0.2.0 (JAX 0.4.29)", "forward_s": 0.82,
-                      "train_step_s": 2.93},
-}
-REFERENCE_PEER = "geoelements/gns"
-# Targets: our time at most this fraction of the reference peer's; achieved
-# FLOP rate at least this fraction of the matmul rate; split layer at least
-# this much faster than the concatenated form.
-TARGET_PEER_RATIO = 0.7
-TARGET_MATMUL_FRACTION = 0.6
-TARGET_SPLIT_SPEEDUP = 1.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -532,35 +516,13 @@ def measure_model(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
   _add_fractions(row, row["matmul"]["median_gflops"])
   log(f"{label}: {row['flops']['forward_dense']['total'] / 1e9:.2f} GFLOP "
       "in dense layers per forward (XLA counts "
-      f"{_gflop(runner.fwd_xla_flops)}) -> "
+      f"{gns_report.gflop(runner.fwd_xla_flops)}) -> "
       f"{row['forward_gflops_dense']:.1f} GFLOP/s = "
-      f"{_pct(row['forward_matmul_fraction_dense'])} of the "
+      f"{gns_report.pct(row['forward_matmul_fraction_dense'])} of the "
       f"{row['matmul']['median_gflops']:.1f} GFLOP/s of "
       f"{matmul.size}^2 matmuls interleaved with it (target "
-      f"{_pct(TARGET_MATMUL_FRACTION)})")
+      f"{gns_report.pct(gns_report.TARGET_MATMUL_FRACTION)})")
   return row
-
-
-def compare_peers(row: dict) -> dict[str, Any]:
-  """Item 2: our paper-model times on the sand block against the quoted
-  peers' (ratio < 1: we are faster)."""
-  out = {"quoted_from": os.path.join(SAND_BLOCK_DIR, "README.md"),
-         "note": "measured there with 2 CPU threads, latent 128, 10 "
-                 "message-passing steps, two hidden layers, batch 1",
-         "target_ratio_to_reference": TARGET_PEER_RATIO,
-         "reference": REFERENCE_PEER, "peers": {}}
-  for peer, p in PEERS.items():
-    out["peers"][peer] = {
-        **p,
-        "forward_ratio": row["forward"]["median_s"] / p["forward_s"],
-        "train_step_ratio": row["train_step"]["median_s"] / p["train_step_s"],
-        "forward_ratio_min": row["forward"]["min_s"] / p["forward_s"],
-        "train_step_ratio_min": (row["train_step"]["min_s"] /
-                                 p["train_step_s"])}
-  ref = out["peers"][REFERENCE_PEER]
-  out["forward_target_met"] = ref["forward_ratio"] <= TARGET_PEER_RATIO
-  out["train_step_target_met"] = ref["train_step_ratio"] <= TARGET_PEER_RATIO
-  return out
 
 
 def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
@@ -616,22 +578,22 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
                                       out["split"]["xla_forward_flops"])
     out["xla_forward_flops_ratio"] = (out["concat"]["xla_forward_flops"] /
                                       out["split"]["xla_forward_flops"])
-  out["target_speedup"] = TARGET_SPLIT_SPEEDUP
-  out["forward_target_met"] = out["forward_speedup"] >= TARGET_SPLIT_SPEEDUP
+  out["target_speedup"] = gns_report.TARGET_SPLIT_SPEEDUP
+  out["forward_target_met"] = out["forward_speedup"] >= gns_report.TARGET_SPLIT_SPEEDUP
   out["train_step_target_met"] = (out["train_step_speedup"] >=
-                                  TARGET_SPLIT_SPEEDUP)
+                                  gns_report.TARGET_SPLIT_SPEEDUP)
   log(f"split vs concatenated first edge layer ({name} model on {g.name}, "
       f"interleaved; outputs agree to {diff:.2g}): forward "
       f"{fwd['split']['median_s']:.3f} s vs {fwd['concat']['median_s']:.3f} s"
       f" ({out['forward_speedup']:.2f}x), training step "
       f"{trn['split']['median_s']:.3f} s vs {trn['concat']['median_s']:.3f} s"
       f" ({out['train_step_speedup']:.2f}x; target "
-      f"{TARGET_SPLIT_SPEEDUP}x); processor FLOPs "
+      f"{gns_report.TARGET_SPLIT_SPEEDUP}x); processor FLOPs "
       f"{out['split']['processor_flops'] / 1e9:.2f} G vs "
       f"{out['concat']['processor_flops'] / 1e9:.2f} G "
       f"({out['processor_flops_ratio']:.2f}x); XLA forward FLOPs "
-      f"{_gflop(out['split']['xla_forward_flops'])} G vs "
-      f"{_gflop(out['concat']['xla_forward_flops'])} G")
+      f"{gns_report.gflop(out['split']['xla_forward_flops'])} G vs "
+      f"{gns_report.gflop(out['concat']['xla_forward_flops'])} G")
 
   out["profile"] = {}
   for key, runner in (("split", split), ("concat", concat)):
@@ -652,189 +614,6 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
           + (f"; dense layers run at {p['dense_gflops']:.1f} GFLOP/s"
              if flops else ""))
   return out
-
-
-# ---------------------------------------------------------------- output ---
-
-
-def _fmt(v, spec=".3f", none="n/a"):
-  return none if v is None else format(v, spec)
-
-
-def _gflop(flops):
-  return "-" if flops is None else f"{flops / 1e9:.2f}"
-
-
-def _pct(v):
-  return "n/a" if v is None else f"{100 * v:.0f}%"
-
-
-def _met(ok: bool) -> str:
-  return "met" if ok else "**MISSED**"
-
-
-def to_markdown(results: dict[str, Any]) -> str:
-  """The results as Markdown tables."""
-  env = results["environment"]
-  mm = results["matmul"]
-  lines = [
-      "# GNS benchmark", "",
-      f"{env['date']}, {env['platform']}, {env['cpu_count']} CPU cores, "
-      f"jax {env['jax_version']} ({env['jax_backend']}). Load average at "
-      f"start {env['load_average_start'][0]:.2f}, at end "
-      f"{env['load_average_end'][0]:.2f} (other processes share the cores: "
-      "absolute times and the peer ratios move with the load)."
-      + (" **Quick mode (tiny sizes): not representative.**"
-         if env["quick"] else ""), "",
-      "Medians of repeats (minimum in brackets); compilation and a warm-up "
-      "call excluded; `jax.block_until_ready` before the clock stops. "
-      "Forward step: one jitted call of `gnsjax.simulator.predict` (features "
-      "+ model) on a window of 6 frames; the radius graph is computed "
-      "before the clock starts and holds exactly the graph's edges. "
-      "Training step: `simulator.loss`, its gradient, clipping and Adam "
-      "(`train.create_optimizer`), batch 1, state donated; no noise. "
-      "GFLOP/s: the dense layers' FLOPs (`models.processor_flops` + "
-      "encoders + decoder) per second. Each row's forward, training step "
-      f"and a jitted {mm['size']}x{mm['size']} float32 matmul (the "
-      "machine's reference rate) ran interleaved, one call of each per "
-      "round.", "",
-      f"Matmul rate of this machine in this run: "
-      f"**{mm['median_gflops']:.1f} GFLOP/s** (median of {mm['samples']} "
-      f"matmuls; from {mm['min_gflops']:.1f} to {mm['max_gflops']:.1f}).",
-      "",
-      "## Forward and training step", "",
-      "| model | scene | nodes | edges | forward s | training step s | "
-      "train/forward | forward GFLOP/s | matmul GFLOP/s beside it | "
-      "forward / matmul rate |",
-      "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
-  for r in results["steps"]:
-    m = r["model"]
-    name = (f"{m['config']} (L={m['latent_size']}, M="
-            f"{m['num_message_passing_steps']})")
-    edges = str(r["n_edges"]) + (
-        f" (padded to {r['n_edges_computed']})" if r["padded"] else "")
-    train_s = (f"{r['train_step']['median_s']:.3f} "
-               f"({r['train_step']['min_s']:.3f})" if "train_step" in r
-               else "-")
-    lines.append(
-        f"| {name} | {r['scene']} | {r['n_nodes']} | {edges} | "
-        f"{r['forward']['median_s']:.3f} ({r['forward']['min_s']:.3f}) | "
-        f"{train_s} | {_fmt(r.get('train_over_forward'), '.2f', '-')} | "
-        f"{_fmt(r['forward_gflops_dense'], '.1f')} | "
-        f"{r['matmul']['median_gflops']:.1f} | "
-        f"{_pct(r['forward_matmul_fraction_dense'])} |")
-  lines += ["", f"Target: forward at least {_pct(TARGET_MATMUL_FRACTION)} "
-            "of the matmul rate: " + ", ".join(
-                f"{r['model']['config']} on {r['scene']}"
-                + (" (padded)" if r["padded"] else "") + " "
-                + _met(r["forward_matmul_fraction_dense"] >=
-                       TARGET_MATMUL_FRACTION)
-                for r in results["steps"]) + ".", "",
-            "FLOPs per forward (dense layers / XLA "
-            "cost analysis of the jitted forward / XLA of the training "
-            "step), GFLOP:", ""]
-  for r in results["steps"]:
-    f = r["flops"]
-    lines.append(
-        f"- {r['model']['config']} on {r['scene']}"
-        + (" (padded)" if r["padded"] else "") +
-        f": {f['forward_dense']['total'] / 1e9:.2f} "
-        f"(processor {f['forward_dense']['processor'] / 1e9:.2f}) / "
-        f"{_gflop(f['forward_xla'])} / {_gflop(f.get('train_xla'))}")
-  lines.append("")
-
-  p = results.get("peers")
-  if p:
-    lines += [
-        "## Against public GNS implementations (paper model, sand block, "
-        "batch 1)", "",
-        f"Peer times quoted from `{p['quoted_from']}` ({p['note']}); not "
-        "re-run here, so their load differs from this run's. Ratio = ours / "
-        "theirs (below 1: we are faster). "
-        f"Target: at most {TARGET_PEER_RATIO}x {p['reference']}.", "",
-        "| implementation | forward s | training step s | our forward / "
-        "theirs | our training step / theirs |",
-        "| --- | ---: | ---: | ---: | ---: |",
-        f"| gnsjax (this run) | {p['ours']['forward_s']:.3f} | "
-        f"{p['ours']['train_step_s']:.3f} | 1 | 1 |"]
-    for name, q in p["peers"].items():
-      lines.append(f"| {name} ({q['version']}) | {q['forward_s']:.2f} | "
-                   f"{q['train_step_s']:.2f} | {q['forward_ratio']:.2f} "
-                   f"(min {q['forward_ratio_min']:.2f}) | "
-                   f"{q['train_step_ratio']:.2f} (min "
-                   f"{q['train_step_ratio_min']:.2f}) |")
-    lines += ["", f"Forward target: {_met(p['forward_target_met'])}; "
-              f"training-step target: {_met(p['train_step_target_met'])}.",
-              ""]
-  else:
-    lines += ["## Against public GNS implementations", "",
-              "Not compared: the paper model was not timed in this run "
-              "(quick mode).", ""]
-
-  s = results["split"]
-  lines += [
-      f"## Split first edge layer vs concatenated ({s['model']['config']} "
-      f"model, {s['scene']}, {s['n_nodes']} nodes, {s['n_edges']} edges)",
-      "",
-      "Same function (concatenated parameters mapped from the split ones; "
-      f"outputs agree to {s['max_abs_output_diff']:.2g}); the four "
-      "programs and the matmul "
-      f"({s['matmul']['median_gflops']:.1f} GFLOP/s) timed interleaved.",
-      "",
-      "| form | forward s | training step s | processor GFLOP | XLA forward "
-      "GFLOP | XLA training GFLOP | forward GFLOP/s |",
-      "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
-  for key, label in (("split", "split (W_e e + (W_s h)[s] + (W_r h)[r])"),
-                     ("concat", "concatenated ([e, h_s, h_r] W)")):
-    v = s[key]
-    lines.append(
-        f"| {label} | {v['forward']['median_s']:.3f} "
-        f"({v['forward']['min_s']:.3f}) | {v['train_step']['median_s']:.3f} "
-        f"({v['train_step']['min_s']:.3f}) | "
-        f"{v['processor_flops'] / 1e9:.2f} | "
-        f"{_gflop(v['xla_forward_flops'])} | "
-        f"{_gflop(v['xla_train_flops'])} | "
-        f"{_fmt(v['forward_gflops_dense'], '.1f')} |")
-  lines += ["", f"Speedup of the split form: forward "
-            f"**{s['forward_speedup']:.2f}x** "
-            f"({_met(s['forward_target_met'])}), training step "
-            f"**{s['train_step_speedup']:.2f}x** "
-            f"({_met(s['train_step_target_met'])}); target "
-            f"{TARGET_SPLIT_SPEEDUP}x. FLOPs saved per forward: processor "
-            f"{s['processor_flops_saved'] / 1e9:.2f} G "
-            f"({s['processor_flops_ratio']:.2f}x fewer)"
-            + (f", XLA {s['xla_forward_flops_saved'] / 1e9:.2f} G "
-               f"({s['xla_forward_flops_ratio']:.2f}x fewer)"
-               if "xla_forward_flops_saved" in s else "") + ".", ""]
-
-  prof = s["profile"]
-  lines += [
-      f"## Where the time goes ({s['model']['config']} model, "
-      f"{s['scene']})", "",
-      "Operation time under `jax.profiler`, summed by kind over the "
-      "optimised HLO's operations (`experiments/op_profile.py`): dense = "
-      "dots with their fused bias/activation; gather = gathers and the "
-      "elementwise work fused with them; scatter = segment sums and "
-      "gathers' transposes; reduce = LayerNorm statistics, bias gradients; "
-      "elementwise = other fusions and copies. Shares of the summed "
-      "operation time (seconds per call in brackets).", "",
-      "| program | " + " | ".join(op_profile.KINDS) + " | total s |",
-      "| --- |" + " ---: |" * (len(op_profile.KINDS) + 1)]
-  for key, v in prof.items():
-    label = key.replace("_", " ", 1).replace("_", " ")
-    if "skipped" in v:
-      lines.append(f"| {label} | skipped: {v['skipped']} |")
-      continue
-    lines.append(f"| {label} | " + " | ".join(
-        f"{_pct(v['share'][k])} ({v['seconds'][k]:.3f})"
-        for k in op_profile.KINDS) + f" | {v['total_s']:.3f} |")
-  dense = [f"{k.split('_')[0]} {v['dense_gflops']:.1f} GFLOP/s"
-           for k, v in prof.items() if v.get("dense_gflops")]
-  if dense:
-    lines += ["", "Dense layers of the forward, counted FLOPs over the time "
-              "of the dot operations alone: " + ", ".join(dense) + "."]
-  lines.append("")
-  return "\n".join(lines)
 
 
 def _json_default(v):
@@ -888,16 +667,17 @@ def run_benchmark(out_dir: str, quick: bool = False,
                 r["scene"] == "sand_block" and not r["padded"]]
   if paper_rows:
     row = paper_rows[0]
-    results["peers"] = compare_peers(row)
+    results["peers"] = gns_report.compare_peers(
+        row, os.path.join(SAND_BLOCK_DIR, "README.md"))
     results["peers"]["ours"] = {"forward_s": row["forward"]["median_s"],
                                 "train_step_s": row["train_step"]["median_s"]}
-    ref = results["peers"]["peers"][REFERENCE_PEER]
-    log(f"against {REFERENCE_PEER} (quoted 0.54 s / 1.53 s): forward "
+    ref = results["peers"]["peers"][gns_report.REFERENCE_PEER]
+    log(f"against {gns_report.REFERENCE_PEER} (quoted 0.54 s / 1.53 s): forward "
         f"{ref['forward_ratio']:.2f}x, training step "
         f"{ref['train_step_ratio']:.2f}x their time (target <= "
-        f"{TARGET_PEER_RATIO}: forward "
-        f"{_met(results['peers']['forward_target_met'])}, training "
-        f"{_met(results['peers']['train_step_target_met'])})")
+        f"{gns_report.TARGET_PEER_RATIO}: forward "
+        f"{gns_report.met(results['peers']['forward_target_met'])}, training "
+        f"{gns_report.met(results['peers']['train_step_target_met'])})")
   results["split"] = measure_split(sizes.split_model, sand, sizes, matmul,
                                    log)
   results["matmul"] = matmul.summary()
@@ -906,7 +686,7 @@ def run_benchmark(out_dir: str, quick: bool = False,
       f"{sizes.matmul_size}^2 float32 matmuls, interleaved with the above)")
   results["environment"]["load_average_end"] = list(os.getloadavg())
 
-  markdown = to_markdown(results)
+  markdown = gns_report.to_markdown(results)
   os.makedirs(out_dir, exist_ok=True)
   stem = os.path.join(out_dir, "gns_benchmark" + ("_quick" if quick else ""))
   benchlib.write_atomic(stem + ".json",
