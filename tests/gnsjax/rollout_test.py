@@ -2,11 +2,16 @@
 
 import dataclasses
 
+import time
+
 from absl.testing import absltest
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
+import mpm
+from gnsjax import checkpoint
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
@@ -17,6 +22,29 @@ from gnsjax import train
 from tests.gnsjax import fixtures
 
 C = 6
+
+
+def tiny_model(types: np.ndarray):
+  """(predictor, params) of an untrained two-step model (random weights)."""
+  model = models.EncodeProcessDecode(latent_size=16, hidden_layers=1,
+                                     num_message_passing_steps=2,
+                                     type_embedding_size=4)
+  node_f = jnp.zeros((len(types), 2 * (C - 1) + 4))
+  params = model.init(jax.random.key(0), node_f, jnp.asarray(types),
+                      jnp.zeros((4, 3)), jnp.zeros(4, jnp.int32),
+                      jnp.zeros(4, jnp.int32))
+  return simulator.ModelPredictor(model), params
+
+
+def spread(n: int, spec: graph.GraphSpec) -> np.ndarray:
+  """[n, 2] positions on a lattice wider than the radius (self-edges only):
+  a list allocated for them overflows at the first real update."""
+  bounds = np.asarray(spec.bounds)
+  columns = int((bounds[0, 1] - bounds[0, 0]) // (1.05 * spec.radius))
+  cells = np.stack(np.divmod(np.arange(n), columns), -1)
+  positions = bounds[:, 0] + 1.05 * spec.radius * cells[:, ::-1]
+  assert np.all(positions <= bounds[:, 1]), "too many nodes to spread"
+  return positions.astype(np.float32)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,23 +93,9 @@ class RolloutTest(absltest.TestCase):
   def test_reallocation_mid_scan_equals_ample_capacity(self):
     t = self.trajectory
     window, types, moving = rollout.trajectory_nodes(t, C)
-    model = models.EncodeProcessDecode(latent_size=16, hidden_layers=1,
-                                       num_message_passing_steps=2,
-                                       type_embedding_size=4)
-    node_f = jnp.zeros((window.shape[1], 2 * (C - 1) + 4))
-    params = model.init(jax.random.key(0), node_f, jnp.asarray(types),
-                        jnp.zeros((4, 3)), jnp.zeros(4, jnp.int32),
-                        jnp.zeros(4, jnp.int32))
-    predictor = simulator.ModelPredictor(model)
+    predictor, params = tiny_model(types)
     spec = self.problem.spec
-    # A list allocated for the same nodes spread on a lattice wider than the
-    # radius (self-edges only): it overflows at the first real update.
-    bounds = np.asarray(spec.bounds)
-    columns = int((bounds[0, 1] - bounds[0, 0]) // (1.05 * spec.radius))
-    cells = np.stack(np.divmod(np.arange(window.shape[1]), columns), -1)
-    spread = bounds[:, 0] + 1.05 * spec.radius * cells[:, ::-1]
-    self.assertTrue(np.all(spread <= bounds[:, 1]))
-    small = graph.allocate(spec, jnp.asarray(spread, jnp.float32))
+    small = graph.allocate(spec, jnp.asarray(spread(window.shape[1], spec)))
     ample = graph.allocate(spec, jnp.asarray(window[-1]), extra_capacity=4096)
     steps = 9
     reallocations = []
@@ -94,6 +108,88 @@ class RolloutTest(absltest.TestCase):
     np.testing.assert_allclose(a, b, atol=1e-6)
     self.assertTrue(np.all(np.isfinite(a)))
 
+
+class RolloutBatchTest(absltest.TestCase):
+  """``rollout_batch`` on three scenes of different node counts."""
+
+  STEPS = 7
+
+  @classmethod
+  def setUpClass(cls):
+    super().setUpClass()
+    cls.data = fixtures.tiny_dataset()
+    cls.problem = train.load_problem(cls.data, fixtures.tiny_config())
+    t0, t1 = list(data.trajectories(data.split_path(cls.data, "test")))[:2]
+    cls.scenes = [rollout.trajectory_nodes(t0, C),
+                  rollout.trajectory_nodes(t1, C)]
+    # The first scene without its last 40 boundary particles.
+    w, ty, m = cls.scenes[0]
+    cls.scenes.append((w[:, :-40], ty[:-40], m[:-40]))
+    cls.predictor, cls.params = tiny_model(cls.scenes[0][1])
+    cls.reallocations = []
+    cls.batched = cls._rollout_batch(cls.problem.spec,
+                                     on_reallocate=cls.reallocations.append)
+
+  @classmethod
+  def _rollout_batch(cls, spec, **kwargs):
+    windows, types, moving = map(list, zip(*cls.scenes))
+    return rollout.rollout_batch(cls.predictor, cls.params, windows, types,
+                                 moving, cls.STEPS, cls.problem.context, spec,
+                                 chunk=4, **kwargs)
+
+  def test_equals_separate_rollouts(self):
+    sizes = [len(ty) for _, ty, _ in self.scenes]
+    self.assertLen(set(sizes), 3)
+    self.assertLen(self.batched, 3)
+    for (w, ty, m), pred in zip(self.scenes, self.batched):
+      self.assertEqual(pred.shape, (self.STEPS,) + w.shape[1:])
+      self.assertEqual(pred.dtype, np.float32)
+      alone = rollout.rollout(self.predictor, self.params, w, ty, m,
+                              self.STEPS, self.problem.context,
+                              self.problem.spec, chunk=4)
+      np.testing.assert_allclose(pred, alone, rtol=0, atol=1e-5)
+      # The model moves the sand (the comparison is not vacuous).
+      self.assertGreater(np.max(np.abs(pred[-1, m] - w[-1, m])), 1e-6)
+
+  def test_reallocation_equals_ample_capacity(self):
+    # No headroom: reallocated lists overflow again as soon as any scene gains
+    # an edge, mid-chunk; the first list (self-edges only) at step 0.
+    spec = dataclasses.replace(self.problem.spec, capacity_multiplier=1.0)
+    n = max(len(ty) for _, ty, _ in self.scenes)
+    small = graph.allocate_batch(
+        spec, jnp.asarray(np.stack([spread(n, spec)] * len(self.scenes))))
+    reallocations = []
+    tight = self._rollout_batch(spec, nbrs=small,
+                                on_reallocate=reallocations.append)
+    self.assertEqual(reallocations[0], 0)
+    self.assertTrue(any(k % 4 for k in reallocations), reallocations)
+    # The reference never reallocated: its capacity sufficed throughout.
+    self.assertEmpty(self.reallocations)
+    for a, b in zip(tight, self.batched):
+      np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+      self.assertTrue(np.all(np.isfinite(a)))
+
+  def test_static_nodes_stay_bit_identical(self):
+    for (w, _, m), pred in zip(self.scenes, self.batched):
+      np.testing.assert_array_equal(
+          pred[:, ~m], np.broadcast_to(w[-1, ~m], pred[:, ~m].shape))
+
+  def test_bad_input_raises(self):
+    windows, types, moving = map(list, zip(*self.scenes))
+    run = lambda w, t, m: rollout.rollout_batch(
+        self.predictor, self.params, w, t, m, 2, self.problem.context,
+        self.problem.spec)
+    with self.assertRaisesRegex(ValueError, "one length.*3, 2 and 3"):
+      run(windows, types[:2], moving)
+    with self.assertRaisesRegex(ValueError, r"scene 1: window must be "
+                                r"\[C, N, 2\].*\(6, \d+\)"):
+      run([windows[0], windows[1][..., 0]] + windows[2:], types, moving)
+    with self.assertRaisesRegex(ValueError, "scene 2: types must be"):
+      run(windows, types[:2] + [types[2][:-1]], moving)
+    with self.assertRaisesRegex(ValueError, "scene 1 has 5 input frames"):
+      run([windows[0], windows[1][1:]] + windows[2:], types, moving)
+    with self.assertRaisesRegex(ValueError, "no scenes"):
+      run([], [], [])
 
 if __name__ == "__main__":
   absltest.main()
