@@ -1,16 +1,20 @@
 """Tests for `gnsjax.rollout`."""
 
 import dataclasses
-
+import os
+import shutil
+import tempfile
 import time
 
 from absl.testing import absltest
 import jax
 import jax.numpy as jnp
+import ml_collections
 import numpy as np
 import pytest
 
 import mpm
+from experiments import tasks
 from gnsjax import checkpoint
 from gnsjax import data
 from gnsjax import features
@@ -190,6 +194,101 @@ class RolloutBatchTest(absltest.TestCase):
       run([windows[0], windows[1][1:]] + windows[2:], types, moving)
     with self.assertRaisesRegex(ValueError, "no scenes"):
       run([], [], [])
+
+def restore_pretrained(bounds: np.ndarray):
+  """(model, params, problem) of the shipped small model, for a domain.
+
+  Built from what the checkpoint stores (config and statistics), without a
+  dataset: ``bounds`` [[x_min, x_max], [y_min, y_max]] (m) is the domain and
+  the radius is the config's dataset's. Restores from a copy, so nothing is
+  written next to the shipped files.
+  """
+  with tempfile.TemporaryDirectory() as workdir:
+    shutil.copytree(os.path.join(tasks.PRETRAINED, "checkpoints"),
+                    os.path.join(workdir, "checkpoints"))
+    mngr = checkpoint.manager(workdir, every_steps=1)
+    step = mngr.latest_step()
+    config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
+    stats = checkpoint.read_stats(mngr, step)
+    stats = features.Stats(*(np.asarray(stats[k], np.float32)
+                             for k in features.Stats._fields))
+    radius = float(config.model.connectivity_radius or
+                   config.dataset.connectivity_radius)
+    bounds = np.asarray(bounds, np.float32)
+    spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
+                           config.train.capacity_multiplier)
+    problem = train.Problem(stats, bounds, radius, spec)
+    trainer = train.Trainer(config, problem)
+    state, _, _ = checkpoint.restore(mngr, trainer.init_state(0), step)
+    mngr.close()
+  return trainer.model, state.params, problem
+
+
+def resting_scene(num_particles: int, x: float, radius: float):
+  """(scene, window [C, N, 2], types, moving): the small config's sand
+  (spacing 0.01 m) at rest above a semicircle obstacle, then its boundary."""
+  scene = mpm.Scene.from_dict({
+      "name": "resting", "granular": {"box": [1.25, 0.5, 1.46, 1.19],
+                                      "spacing": 0.01,
+                                      "num_particles": num_particles},
+      "obstacles": [{"shape": "semicircle", "x": x, "radius": radius}]})
+  sand = mpm.granular_particles(scene)
+  boundary, boundary_types = mpm.boundary_particles(scene)
+  nodes = np.concatenate([sand, boundary])
+  window = np.broadcast_to(nodes[None], (C,) + nodes.shape)
+  types = np.concatenate(
+      [np.full(len(sand), mpm.SAND_TYPE, np.int32), boundary_types])
+  moving = np.arange(len(types)) < len(sand)
+  return scene, window, types, moving
+
+
+@pytest.mark.slow  # ~1 min on 2 CPU cores: 2000 + 2 x 600 model steps.
+class PretrainedStabilityTest(absltest.TestCase):
+  """Long rollouts of the shipped small model stay finite and in the domain.
+
+  The sand starts at rest, as the MPM's does. (The model keeps a resting heap
+  nearly still, so this guards against blow-ups, not against drift.)
+  """
+
+  @classmethod
+  def setUpClass(cls):
+    super().setUpClass()
+    cls.scenes = [resting_scene(200, 0.9, 0.04), resting_scene(180, 0.7, 0.03)]
+    domain = cls.scenes[0][0].domain
+    cls.bounds = np.array([[0.0, domain.width], [0.0, domain.height]])
+    model, cls.params, cls.problem = restore_pretrained(cls.bounds)
+    cls.predictor = simulator.ModelPredictor(model)
+
+  def _assert_in_domain(self, positions):
+    self.assertTrue(np.all(np.isfinite(positions)))
+    margin = 3 * self.problem.radius
+    out = np.any((positions < self.bounds[:, 0] - margin) |
+                 (positions > self.bounds[:, 1] + margin), axis=-1)
+    steps, nodes = np.nonzero(out)
+    self.assertFalse(out.any(), f"{len(set(nodes))} nodes leave the domain, "
+                     f"first at step {steps.min() if out.any() else None}")
+
+  def test_2000_steps_stay_finite_in_the_domain(self):
+    _, window, types, moving = self.scenes[0]
+    start = time.perf_counter()
+    pred = rollout.rollout(self.predictor, self.params, window, types, moving,
+                           2000, self.problem.context, self.problem.spec)
+    print(f"2000-step rollout: {time.perf_counter() - start:.1f} s")
+    self.assertEqual(pred.shape, (2000,) + window.shape[1:])
+    self._assert_in_domain(pred)
+
+  def test_600_batched_steps_stay_finite_in_the_domain(self):
+    _, windows, types, moving = map(list, zip(*self.scenes))
+    self.assertNotEqual(len(types[0]), len(types[1]))
+    start = time.perf_counter()
+    preds = rollout.rollout_batch(self.predictor, self.params, windows, types,
+                                  moving, 600, self.problem.context,
+                                  self.problem.spec)
+    print(f"600-step batched rollout: {time.perf_counter() - start:.1f} s")
+    for w, pred in zip(windows, preds):
+      self.assertEqual(pred.shape, (600,) + w.shape[1:])
+      self._assert_in_domain(pred)
+
 
 if __name__ == "__main__":
   absltest.main()
