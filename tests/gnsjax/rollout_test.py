@@ -195,6 +195,7 @@ class RolloutBatchTest(absltest.TestCase):
     with self.assertRaisesRegex(ValueError, "no scenes"):
       run([], [], [])
 
+
 def restore_pretrained(bounds: np.ndarray):
   """(model, params, problem) of the shipped small model, for a domain.
 
