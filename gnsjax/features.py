@@ -54,7 +54,11 @@ def edge_features(position: jax.Array, senders: jax.Array,
                   receivers: jax.Array, radius: float) -> jax.Array:
   """Edge features [E, 3] from the last input positions [N, 2] (m)."""
   d = (position[senders] - position[receivers]) / radius
-  return jnp.concatenate([d, jnp.linalg.norm(d, axis=-1, keepdims=True)], -1)
+  # The norm's gradient at a self-edge (d = 0) would be 0/0: inverse design
+  # differentiates with respect to positions.
+  sq = jnp.sum(d * d, -1, keepdims=True)
+  norm = jnp.where(sq > 0, jnp.sqrt(jnp.where(sq > 0, sq, 1.0)), 0.0)
+  return jnp.concatenate([d, norm], -1)
 
 
 def target_acceleration(positions: jax.Array, target: jax.Array,
