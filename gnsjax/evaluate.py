@@ -42,18 +42,30 @@ from mpm import dataset as dataset_lib
 from mpm import io as mpm_io
 
 
-def load_run(workdir: str, data_dir: str, step: int | None = None):
-  """(config, problem, trainer, state, step) of a run's checkpoint."""
-  with open(os.path.join(workdir, "config.json")) as f:
-    import ml_collections  # pylint: disable=g-import-not-at-top
-    config = ml_collections.ConfigDict(json.load(f))
-  mngr = checkpoint.manager(workdir, config.checkpoint.every_steps,
-                            config.checkpoint.named_steps)
+def load_run(workdir: str, data_dir: str | None = None,
+             step: int | None = None, scene: mpm.Scene | None = None):
+  """(config, problem, trainer, state, step) of a run's checkpoint.
+
+  Every checkpoint stores its config and statistics, so a work directory (or
+  a shipped model such as ``experiments/pretrained/small``) restores on its
+  own. The domain and connectivity radius come from the dataset of
+  ``data_dir`` or, without one, from ``scene``'s domain and the config.
+  """
+  import ml_collections  # pylint: disable=g-import-not-at-top
+  mngr = checkpoint.manager(workdir, every_steps=1)
   step = mngr.latest_step() if step is None else step
   if step is None:
     raise FileNotFoundError(f"{workdir}: no checkpoint to evaluate")
-  problem = train.load_problem(data_dir, config,
-                               checkpoint.read_stats(mngr, step))
+  config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
+  stats = checkpoint.read_stats(mngr, step)
+  if data_dir is not None:
+    problem = train.load_problem(data_dir, config, stats)
+  elif scene is not None:
+    problem = train.make_problem(
+        config, stats, [[0.0, scene.domain.width], [0.0, scene.domain.height]],
+        config.dataset.connectivity_radius)
+  else:
+    raise ValueError("load_run: give data_dir or scene (for the domain)")
   trainer = train.Trainer(config, problem)
   state, _, _ = checkpoint.restore(mngr, trainer.init_state(0), step)
   mngr.close()

@@ -95,21 +95,27 @@ class Problem:
     return {k: np.asarray(v).tolist() for k, v in self.stats._asdict().items()}
 
 
+def make_problem(config, stats: dict, bounds, radius: float) -> Problem:
+  """The problem of statistics ``stats`` (a checkpoint's), domain ``bounds``
+  [[x_min, x_max], [y_min, y_max]] (m) and the data's connectivity radius
+  (the model config's, if set, wins)."""
+  stats = features.Stats(*(np.asarray(stats[k], np.float32)
+                           for k in features.Stats._fields))
+  radius = float(config.model.connectivity_radius or radius)
+  bounds = np.asarray(bounds, np.float32)
+  spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
+                         config.train.capacity_multiplier)
+  return Problem(stats, bounds, radius, spec)
+
+
 def load_problem(data_dir: str, config, stats: dict | None = None) -> Problem:
   """The dataset's problem; ``stats`` (a checkpoint's) replace the data's."""
   train_path = data.split_path(data_dir, "train")
   if stats is None:
-    stats = features.Stats(*data.load_stats(train_path))
-  else:
-    stats = features.Stats(*(np.asarray(stats[k], np.float32)
-                             for k in features.Stats._fields))
+    stats = data.load_stats(train_path)._asdict()
   header = mpm_io.read_header(train_path)
-  radius = float(config.model.connectivity_radius or
-                 header["connectivity_radius"])
-  bounds = np.asarray(header["bounds"], np.float32)
-  spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
-                         config.train.capacity_multiplier)
-  return Problem(stats, bounds, radius, spec)
+  return make_problem(config, stats, header["bounds"],
+                      header["connectivity_radius"])
 
 
 # The keys a training config must have (experiments/configs/paper.py).
