@@ -198,3 +198,46 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
     print(f"{k:>32}: {value:.4g}" if isinstance(value, float) else
           f"{k:>32}: {value}")
   return paths
+
+
+def design_scene(shape: str = "semicircle", size: Sequence[float] = (0.04,),
+                 x0: float = 1.0, num_frames: int = 600,
+                 spacing: float = 0.01, num_particles: int = 250
+                 ) -> mpm.Scene:
+  """The paper's heap at the small config's spacing with one obstacle."""
+  from gnsjax import design  # pylint: disable=g-import-not-at-top
+  from mpm import scene as scene_lib  # pylint: disable=g-import-not-at-top
+  keys = scene_lib.OBSTACLE_SHAPES[shape]
+  if len(size) != len(keys):
+    raise ValueError(f"size = {list(size)}: a {shape} needs {len(keys)} "
+                     f"value(s), {list(keys)} (m)")
+  base = mpm.Scene.from_dict({
+      "name": f"design_{shape}",
+      "granular": {"box": list(scene_lib.Granular.box), "spacing": spacing,
+                   "num_particles": num_particles},
+      "num_frames": num_frames})
+  return design.with_obstacle(base, shape, x0, **dict(zip(keys, size)))
+
+
+def inverse_design(out_dir: str, *, scene_path: str | None = None,
+                   shape: str = "semicircle", size: Sequence[float] = (0.04,),
+                   x0: float = 1.0, num_frames: int = 600,
+                   simulator: str = "gns", objective: str = "passed_fraction",
+                   x_protect: float = 0.4, target_x: float = 0.6,
+                   temperature: float | None = None,
+                   workdir: str | None = PRETRAINED, steps: int = 8,
+                   learning_rate: float = 0.05, sweep_points: int = 9,
+                   optimise_size: bool = False) -> dict:
+  """The inverse-design study (``gnsjax.design_study.study``) of a scene."""
+  from gnsjax import design_study  # pylint: disable=g-import-not-at-top
+  from gnsjax import objectives  # pylint: disable=g-import-not-at-top
+  if scene_path is not None:
+    scene = mpm.Scene.load(scene_path)
+  else:
+    scene = design_scene(shape, size, x0, num_frames)
+  obj = objectives.make(objective, x_protect=x_protect, target_x=target_x,
+                        temperature=temperature)
+  return design_study.study(
+      out_dir, scene, obj, simulator=simulator, workdir=workdir or None,
+      steps=steps, learning_rate=learning_rate, sweep_points=sweep_points,
+      optimise_size=optimise_size, log=lambda line: tqdm.tqdm.write(line))

@@ -1,0 +1,187 @@
+"""An inverse-design study: optimise a placement, verify it with the MPM,
+compare with the brute-force sweep a user would otherwise run.
+
+``study(...)`` writes to ``out_dir``:
+
+- ``history.csv``: the optimiser's iterations (placement, objective, gradient,
+  seconds);
+- ``sweep.csv``: the objective against x by MPM and GNS forward rollouts;
+- ``objective_vs_x.png``: both curves with the optimiser's path;
+- ``summary.json`` and ``report.md``: the MPM's verdict on the start and the
+  optimum, and time and objective of the optimiser against the sweep.
+"""
+
+import csv
+import os
+import time
+from typing import Any, Callable
+
+import matplotlib
+
+matplotlib.use("Agg")
+# pylint: disable=g-import-not-at-top,wrong-import-position
+import matplotlib.pyplot as plt
+import numpy as np
+
+import mpm
+from gnsjax import design
+from gnsjax import evaluate
+from gnsjax import objectives
+from mpm import io as mpm_io
+
+SIMULATORS = ("gns", "mpm")
+
+
+def _write_csv(path: str, rows: list[dict]):
+  with open(path, "w", newline="") as f:
+    writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+
+
+def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
+          simulator: str = "gns", workdir: str | None = None,
+          steps: int = 8, learning_rate: float = 0.05,
+          sweep_points: int = 9, optimise_size: bool = False,
+          log: Callable[[str], None] = print) -> dict[str, Any]:
+  """Optimises the first obstacle's x of ``scene`` and checks the result.
+
+  Args:
+    out_dir: where the files go.
+    scene: its first obstacle is designed, within x in [0.5, 1.3] m.
+    objective: what to minimise.
+    simulator: "gns" or "mpm", whose gradients drive the optimiser.
+    workdir: the trained GNS (a run directory or a shipped model); needed
+      for the GNS curve and for ``simulator="gns"``.
+    steps, learning_rate: of projected Adam.
+    sweep_points: x values of the brute-force sweep over the range.
+    optimise_size: optimise the obstacle's size too (within Table 1's
+      ranges); the sweep stays over x at the starting size.
+  """
+  if simulator not in SIMULATORS:
+    raise ValueError(f"simulator: unknown {simulator!r}; allowed: "
+                     f"{list(SIMULATORS)}")
+  os.makedirs(out_dir, exist_ok=True)
+  placement = design.Placement(
+      scene, free=("x", "size") if optimise_size else ("x",))
+  sims = {"mpm": design.MPMRollout(placement)}
+  if workdir is not None:
+    config, problem, trainer, state, _ = evaluate.load_run(workdir,
+                                                           scene=scene)
+    sims["gns"] = design.GNSRollout(placement, trainer.model, state.params,
+                                    problem, config.train.input_frames)
+  if simulator not in sims:
+    raise ValueError("simulator='gns' needs the trained model's workdir")
+
+  def log_record(r):
+    log(f"iteration {r['iteration']}: x = {r['x']:.4f} m, "
+        f"{objective.name} = {r['objective']:.5g}, d/dx = {r['grad_x']:.4g}, "
+        f"{r['seconds']:.1f} s")
+
+  start = placement.initial()
+  history = design.optimise(sims[simulator], objective.smooth, start,
+                            steps=steps, learning_rate=learning_rate,
+                            log=log_record)
+  _write_csv(os.path.join(out_dir, "history.csv"), history)
+  best = min(history, key=lambda r: r["objective"])
+
+  # The MPM's verdict on the start and on the optimum.
+  verdict = {}
+  for label, record in (("start", history[0]), ("optimum", best)):
+    params = _params(record, optimise_size)
+    positions = sims["mpm"].rollout(params)
+    verdict[label] = {"x": record["x"], "plain": objective.plain(positions),
+                      "smooth": float(objective.smooth(positions)),
+                      **({"size": params["size"].tolist()}
+                         if optimise_size else {})}
+  improved = verdict["optimum"]["plain"] < verdict["start"]["plain"]
+
+  # The brute-force baseline: forward rollouts over the range (warmed up, so
+  # seconds exclude compilation).
+  xs = np.linspace(*placement.x_range, sweep_points)
+  rows = {}
+  for name, sim in sims.items():
+    sim.rollout(start)
+    rows[name] = design.sweep(sim, objective.plain, objective.smooth, start,
+                              xs)
+  sweep_rows = [{"x": float(x), **{f"{n}_{k}": rows[n][i][k]
+                                    for n in rows for k in ("plain", "smooth",
+                                                            "seconds")}}
+                for i, x in enumerate(xs)]
+  _write_csv(os.path.join(out_dir, "sweep.csv"), sweep_rows)
+  mpm_best = min(rows["mpm"], key=lambda r: r["plain"])
+  summary = {
+      "scene": scene.to_dict(), "objective": objective.name,
+      "unit": objective.unit, "simulator": simulator, "steps": steps,
+      "learning_rate": learning_rate,
+      "optimiser": {
+          "best_x": best["x"], "best_objective": best["objective"],
+          "seconds": float(sum(r["seconds"] for r in history)),
+          "seconds_after_first": float(sum(r["seconds"]
+                                           for r in history[1:])),
+          "gradient_evaluations": steps},
+      "mpm_verdict": verdict, "improved_under_mpm": bool(improved),
+      "sweep": {
+          "points": int(sweep_points),
+          "mpm_seconds": float(sum(r["seconds"] for r in rows["mpm"])),
+          "mpm_best_x": mpm_best["x"], "mpm_best_plain": mpm_best["plain"],
+          **({"gns_seconds": float(sum(r["seconds"] for r in rows["gns"]))}
+             if "gns" in rows else {})},
+  }
+  mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
+  _plot(rows, history, objective, simulator,
+        os.path.join(out_dir, "objective_vs_x.png"))
+  with open(os.path.join(out_dir, "report.md"), "w") as f:
+    f.write(report(summary))
+  return summary
+
+
+def _params(record: dict, with_size: bool) -> design.Params:
+  """The placement of a history record."""
+  params = {"x": np.float32(record["x"])}
+  if with_size:
+    params["size"] = np.asarray([record["size0"], record["size1"]],
+                                np.float32)
+  return params
+
+
+def _plot(rows, history, objective, simulator, path):
+  fig, ax = plt.subplots(figsize=(6, 4))
+  for name, style in (("mpm", "k-o"), ("gns", "b-s")):
+    if name in rows:
+      ax.plot([r["x"] for r in rows[name]], [r["smooth"] for r in rows[name]],
+              style, ms=4, label=f"{name.upper()} sweep")
+  ax.plot([r["x"] for r in history], [r["objective"] for r in history],
+          "r.--", label=f"Adam on {simulator.upper()} gradients")
+  ax.plot(history[0]["x"], history[0]["objective"], "r^", ms=8,
+          label="start")
+  ax.set_xlabel("obstacle x (m)")
+  ax.set_ylabel(f"{objective.name} (smooth)")
+  ax.legend(fontsize=8)
+  fig.tight_layout()
+  fig.savefig(path, dpi=100)
+  plt.close(fig)
+
+
+def report(summary: dict) -> str:
+  o, v, s = summary["optimiser"], summary["mpm_verdict"], summary["sweep"]
+  unit = f" {summary['unit']}" if summary["unit"] else ""
+  lines = [
+      f"# Inverse design: {summary['objective']}", "",
+      f"Adam on {summary['simulator'].upper()} gradients, "
+      f"{o['gradient_evaluations']} gradient evaluations in "
+      f"{o['seconds']:.1f} s ({o['seconds_after_first']:.1f} s after the "
+      f"first, which compiles): best x = {o['best_x']:.4f} m, smooth "
+      f"objective {o['best_objective']:.5g}.", "",
+      "| MPM re-simulation | x (m) | objective | smooth |", "|---|---|---|---|",
+      f"| start | {v['start']['x']:.4f} | {v['start']['plain']:.5g}{unit} | "
+      f"{v['start']['smooth']:.5g} |",
+      f"| optimum | {v['optimum']['x']:.4f} | {v['optimum']['plain']:.5g}"
+      f"{unit} | {v['optimum']['smooth']:.5g} |", "",
+      f"Improved under the MPM: **{summary['improved_under_mpm']}**.", "",
+      f"Brute-force MPM sweep ({s['points']} placements): "
+      f"{s['mpm_seconds']:.1f} s, best x = {s['mpm_best_x']:.4f} m with "
+      f"{s['mpm_best_plain']:.5g}{unit}."]
+  if "gns_seconds" in s:
+    lines.append(f"The same sweep with the GNS: {s['gns_seconds']:.1f} s.")
+  return "\n".join(lines) + "\n"

@@ -1,0 +1,45 @@
+"""The inverse-design entry point's job on a short scene."""
+
+import json
+import os
+import tempfile
+
+from absl.testing import absltest
+
+from experiments import tasks
+
+
+class InverseDesignTest(absltest.TestCase):
+
+  def test_gns_study_writes_history_sweep_plot_and_verdict(self):
+    out = tempfile.mkdtemp()
+    summary = tasks.inverse_design(
+        out, shape="semicircle", size=(0.03,), x0=1.28, num_frames=12,
+        simulator="gns", objective="centroid", target_x=1.0, steps=2,
+        learning_rate=0.01, sweep_points=2)
+    for name in ("history.csv", "sweep.csv", "objective_vs_x.png",
+                 "summary.json", "report.md"):
+      self.assertTrue(os.path.exists(os.path.join(out, name)), name)
+    with open(os.path.join(out, "summary.json")) as f:
+      self.assertEqual(json.load(f)["simulator"], "gns")
+    # The optimiser moved x by at most one step per iteration, in range.
+    self.assertLessEqual(abs(summary["optimiser"]["best_x"] - 1.28), 0.0101)
+    v = summary["mpm_verdict"]
+    self.assertEqual(summary["improved_under_mpm"],
+                     v["optimum"]["plain"] < v["start"]["plain"])
+    self.assertEqual(summary["sweep"]["points"], 2)
+
+  def test_bad_inputs_are_refused(self):
+    with self.assertRaisesRegex(ValueError, r"x = 1.4.*\[0.5, 1.3\]"):
+      tasks.inverse_design(tempfile.mkdtemp(), x0=1.4, num_frames=12,
+                           simulator="mpm", workdir=None)
+    with self.assertRaisesRegex(ValueError, "semicircle needs 1"):
+      tasks.inverse_design(tempfile.mkdtemp(), size=(0.03, 0.04),
+                           num_frames=12)
+    with self.assertRaisesRegex(ValueError, "simulator.*allowed"):
+      tasks.inverse_design(tempfile.mkdtemp(), simulator="fem",
+                           num_frames=12, workdir=None)
+
+
+if __name__ == "__main__":
+  absltest.main()
