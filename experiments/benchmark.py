@@ -21,6 +21,11 @@ dataset (``experiments/dataset_benchmark.py``): wall time to generate 20 paper
 trajectories with 2 and 1 worker processes, extrapolated to the paper's 1100,
 and windows and padded batches read per second from ``--read_data``. Writes
 ``dataset_benchmark.json`` and ``dataset_benchmark.md``.
+
+design (``experiments/design_benchmark.py``): the gradient of an objective
+w.r.t. an obstacle's x against the forward rollout, for MPM and GNS, time
+ratio and XLA memory. Writes ``design_benchmark.json`` and
+``design_benchmark.md``.
 """
 
 from absl import app
@@ -28,17 +33,18 @@ from absl import flags
 from absl import logging
 
 from experiments import dataset_benchmark
+from experiments import design_benchmark
 from experiments import gns_benchmark
 from experiments import mpm_benchmark
 from experiments import runtime
 
-_BENCHMARKS = ("mpm", "gns", "dataset")
+_BENCHMARKS = ("mpm", "gns", "dataset", "design")
 
 _OUT = flags.DEFINE_string("out", "docs/benchmarks",
                            "Directory for the JSON and Markdown results.")
 _WHAT = flags.DEFINE_list("what", ["mpm", "gns"],
                           "Benchmarks to run, comma-separated: mpm, gns, "
-                          "dataset.")
+                          "dataset, design.")
 _QUICK = flags.DEFINE_bool("quick", False,
                            "Tiny sizes (seconds): a smoke test, not figures.")
 _TAICHI = flags.DEFINE_bool("taichi", True,
@@ -79,6 +85,11 @@ def main(argv):
         _OUT.value, read_data=_READ_DATA.value, quick=_QUICK.value,
         cache=runtime.enable_compilation_cache(), log=logging.info)
     print(results["markdown"])
+  if "design" in what:
+    results = design_benchmark.run_benchmark(_OUT.value, quick=_QUICK.value,
+                                             log=logging.info)
+    print(results["markdown"])
+    print("Wrote " + ", ".join(results["files"]))
 
 
 if __name__ == "__main__":

@@ -1,22 +1,18 @@
 """Tests for `gnsjax.rollout`."""
 
 import dataclasses
-import os
-import shutil
-import tempfile
 import time
 
 from absl.testing import absltest
 import jax
 import jax.numpy as jnp
-import ml_collections
 import numpy as np
 import pytest
 
 import mpm
 from experiments import tasks
-from gnsjax import checkpoint
 from gnsjax import data
+from gnsjax import evaluate
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import models
@@ -196,35 +192,6 @@ class RolloutBatchTest(absltest.TestCase):
       run([], [], [])
 
 
-def restore_pretrained(bounds: np.ndarray):
-  """(model, params, problem) of the shipped small model, for a domain.
-
-  Built from what the checkpoint stores (config and statistics), without a
-  dataset: ``bounds`` [[x_min, x_max], [y_min, y_max]] (m) is the domain and
-  the radius is the config's dataset's. Restores from a copy, so nothing is
-  written next to the shipped files.
-  """
-  with tempfile.TemporaryDirectory() as workdir:
-    shutil.copytree(os.path.join(tasks.PRETRAINED, "checkpoints"),
-                    os.path.join(workdir, "checkpoints"))
-    mngr = checkpoint.manager(workdir, every_steps=1)
-    step = mngr.latest_step()
-    config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
-    stats = checkpoint.read_stats(mngr, step)
-    stats = features.Stats(*(np.asarray(stats[k], np.float32)
-                             for k in features.Stats._fields))
-    radius = float(config.model.connectivity_radius or
-                   config.dataset.connectivity_radius)
-    bounds = np.asarray(bounds, np.float32)
-    spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
-                           config.train.capacity_multiplier)
-    problem = train.Problem(stats, bounds, radius, spec)
-    trainer = train.Trainer(config, problem)
-    state, _, _ = checkpoint.restore(mngr, trainer.init_state(0), step)
-    mngr.close()
-  return trainer.model, state.params, problem
-
-
 def resting_scene(num_particles: int, x: float, radius: float):
   """(scene, window [C, N, 2], types, moving): the small config's sand
   (spacing 0.01 m) at rest above a semicircle obstacle, then its boundary."""
@@ -257,8 +224,11 @@ class PretrainedStabilityTest(absltest.TestCase):
     cls.scenes = [resting_scene(200, 0.9, 0.04), resting_scene(180, 0.7, 0.03)]
     domain = cls.scenes[0][0].domain
     cls.bounds = np.array([[0.0, domain.width], [0.0, domain.height]])
-    model, cls.params, cls.problem = restore_pretrained(cls.bounds)
-    cls.predictor = simulator.ModelPredictor(model)
+    # From the checkpoint alone (its stored config and statistics).
+    _, cls.problem, trainer, state, _ = evaluate.load_run(
+        tasks.PRETRAINED, scene=cls.scenes[0][0])
+    cls.params = state.params
+    cls.predictor = simulator.ModelPredictor(trainer.model)
 
   def _assert_in_domain(self, positions):
     self.assertTrue(np.all(np.isfinite(positions)))
