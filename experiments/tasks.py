@@ -65,28 +65,47 @@ def render_file(traj_path: str, out_dir: str, index: int = 0,
 
 def rollout_to_files(workdir: str, data_dir: str, out_dir: str,
                      split: str = "test",
-                     max_trajectories: int | None = None) -> dict[str, str]:
-  """Rolls out a split with a trained run; writes predicted and true files."""
-  from gnsjax import evaluate  # pylint: disable=g-import-not-at-top
+                     max_trajectories: int | None = None,
+                     project: bool = True) -> dict[str, str]:
+  """Rolls out a split with a trained run; writes predicted and true files.
+
+  Both files hold the frames the model predicts (every ``frame_stride``-th
+  stored frame after the inputs), preceded by its input frames.
+  """
+  from gnsjax import rollout as rollout_lib  # pylint: disable=g-import-not-at-top
+  from gnsjax import train  # pylint: disable=g-import-not-at-top
+  run = train.load_run(workdir)
+  path = data.split_path(data_dir, split)
   os.makedirs(out_dir, exist_ok=True)
-  config, problem, trainer, state, _ = evaluate.load_run(workdir, data_dir)
-  c = config.train.input_frames
-  results = evaluate.rollout_split(trainer, state, problem,
-                                   data.split_path(data_dir, split), c,
-                                   max_trajectories)
+  c, k = run.problem.input_frames, run.problem.frame_stride
+  predicted, truth = [], []
+  for i, t in enumerate(tqdm.tqdm(list(data.trajectories(path)),
+                                  unit="traj", desc="rollout")):
+    if max_trajectories is not None and i >= max_trajectories:
+      break
+    inputs = rollout_lib.input_frame_indices(c, k)
+    frames = rollout_lib.predicted_frame_indices(len(t.positions), c, k)
+    out = rollout_lib.rollout_trajectory(run.model, run.params, t,
+                                         run.problem, project=project)
+    predicted.append(_with_frames(t, np.concatenate(
+        [t.positions[inputs], out.positions]), k))
+    truth.append(_with_frames(t, t.positions[np.concatenate([inputs,
+                                                             frames])], k))
   paths = {"predicted": os.path.join(out_dir, "predicted.h5"),
            "truth": os.path.join(out_dir, "truth.h5")}
-  stats = {k: v for k, v in mpm_io.read_header(
-      data.split_path(data_dir, split)).items() if k.endswith(("_mean",
-                                                               "_std"))}
-  predicted = [dataclasses.replace(
-      r["trajectory"], positions=np.concatenate(
-          [r["trajectory"].positions[:c], r["predicted"]]).astype(np.float32))
-               for r in results]
-  mpm_io.write_trajectories(paths["predicted"], predicted, stats=stats)
-  mpm_io.write_trajectories(paths["truth"], [r["trajectory"] for r in results],
-                            stats=stats)
+  mpm_io.write_trajectories(paths["predicted"], predicted)
+  mpm_io.write_trajectories(paths["truth"], truth)
   return paths
+
+
+def _with_frames(t: mpm_io.Trajectory, positions: np.ndarray, stride: int):
+  """The trajectory with every ``stride``-th frame from 0 as ``positions``:
+  its scene's frame count and frame_dt follow, so the file stays
+  self-consistent."""
+  scene = dataclasses.replace(t.scene, num_frames=len(positions),
+                              frame_dt=t.scene.frame_dt * stride)
+  return dataclasses.replace(t, positions=positions.astype(np.float32),
+                             scene=scene)
 
 
 # A small pretrained model shipped with the project (experiments/configs/
@@ -135,8 +154,7 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
      constant-velocity baseline.
   4. Writes the metrics and an MPM | GNS animation and frame grid.
   """
-  from gnsjax import evaluate as evaluate_lib  # pylint: disable=g-import-not-at-top
-  from gnsjax import metrics  # pylint: disable=g-import-not-at-top
+  from experiments import evaluation  # pylint: disable=g-import-not-at-top
   from gnsjax import rollout as rollout_lib  # pylint: disable=g-import-not-at-top
   from gnsjax import train  # pylint: disable=g-import-not-at-top
   from mpm import dataset  # pylint: disable=g-import-not-at-top
@@ -157,43 +175,48 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
                      progress=lambda done, *_: bar.update(done - bar.n))
   train.train_and_evaluate(config, data_dir, workdir)
 
-  _, problem, trainer, state, step = evaluate_lib.load_run(workdir, data_dir)
-  c = config.train.input_frames
+  run = train.load_run(workdir)
+  c, k = run.problem.input_frames, run.problem.frame_stride
   t = next(t for t in data.trajectories(data.split_path(data_dir, "test"))
            if dataset.group_of(t.scene.name) == "triangle")
-  predicted = rollout_lib.rollout_trajectory(
-      trainer.model, state.params, t, problem, len(t.positions) - c, c)
-  truth = t.positions[c:]
-  v = t.positions[c - 1] - t.positions[c - 2]
-  constant = t.positions[c - 1][None] + v[None] * np.arange(
-      1, len(truth) + 1)[:, None, None]
-  mse = metrics.positional_mse(predicted, truth)
+  frames = rollout_lib.predicted_frame_indices(len(t.positions), c, k)
+  with tqdm.tqdm(total=1, unit="rollout", desc="GNS rollout") as bar:
+    out = rollout_lib.rollout_trajectory(run.model, run.params, t,
+                                         run.problem)
+    bar.update(1)
+  scores = evaluation.score(t, out, frames, run.problem)
+  row = evaluation.per_trajectory_row({
+      "index": 0, "name": t.scene.name, **evaluation.describe(t.scene),
+      **scores})
   result = {
-      "scene": t.scene.name, "model_step": step, "fine_tuned_from": start,
-      "particles": int(t.positions.shape[1]), "steps": len(truth),
-      "gns_mean_mse_m2": float(np.mean(mse)),
-      "gns_final_mse_m2": float(mse[-1]),
-      "constant_velocity_mean_mse_m2": float(np.mean(
-          metrics.positional_mse(constant, truth))),
-      "gns_final_runout_error_m": float(
-          metrics.runout_error(predicted, truth)[-1]),
-      "gns_deposit_error_m": metrics.deposit_error(
-          predicted[-1], truth[-1], 2 * t.scene.granular.spacing),
+      "scene": t.scene.name, "model_step": run.step, "fine_tuned_from": start,
+      "particles": int(t.positions.shape[1]), "learned_steps": len(frames),
+      "frame_stride": k,
+      "gns_mean_mse_m2": row["mean_mse"],
+      "gns_final_mse_m2": row["final_mse"],
+      "constant_velocity_mean_mse_m2": row["mean_mse_constant_velocity"],
+      "gns_final_runout_error_m": row["final_runout_error"],
+      "gns_front_error_relative": row["front_error_relative"],
+      "gns_deposit_error_m": row["deposit_error"],
+      "gns_max_inside_solids": row["max_inside_solids"],
+      "gns_max_outside_domain": row["max_outside_domain"],
+      "mpm_max_inside_solids": row["mpm_max_inside_solids"],
+      "gns_mean_pushed_fraction": row["mean_pushed_fraction"],
   }
   paths = {"data": data_dir, "run": workdir,
            "metrics": os.path.join(out_dir, "metrics.json"),
            "truth": os.path.join(out_dir, "truth.h5"),
            "predicted": os.path.join(out_dir, "predicted.h5")}
   mpm_io.write_json(paths["metrics"], result)
-  stats = {k: v for k, v in mpm_io.read_header(
-      data.split_path(data_dir, "test")).items() if k.endswith(("_mean",
-                                                                "_std"))}
-  mpm_io.write_trajectories(paths["truth"], [t], stats=stats)
-  mpm_io.write_trajectories(paths["predicted"], [dataclasses.replace(
-      t, positions=np.concatenate([t.positions[:c], predicted]).astype(
-          np.float32))], stats=stats)
+  inputs = rollout_lib.input_frame_indices(c, k)
+  mpm_io.write_trajectories(paths["truth"], [_with_frames(
+      t, t.positions[np.concatenate([inputs, frames])], k)])
+  mpm_io.write_trajectories(paths["predicted"], [_with_frames(
+      t, np.concatenate([t.positions[inputs], out.positions]), k)])
+  shown = np.linspace(1, len(inputs) + len(frames) - 1, 5).astype(int)
   paths["animation"], paths["frames"] = render_file(
-      paths["truth"], out_dir, compare_path=paths["predicted"])
+      paths["truth"], out_dir, frames=tuple(shown),
+      compare_path=paths["predicted"])
   for k, value in result.items():
     print(f"{k:>32}: {value:.4g}" if isinstance(value, float) else
           f"{k:>32}: {value}")
@@ -241,3 +264,86 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
       out_dir, scene, obj, simulator=simulator, workdir=workdir or None,
       steps=steps, learning_rate=learning_rate, sweep_points=sweep_points,
       optimise_size=optimise_size, log=lambda line: tqdm.tqdm.write(line))
+
+
+# The training recipe's parts, added one at a time (docs/gns.md): each entry
+# changes the config of the entry before it. "previous" is the recipe of the
+# first small model (with the SDF node features every model now has).
+ABLATION = (
+    ("previous", {"model.boundary_particles": True, "train.frame_stride": 1,
+                  "train.noise_std": 1e-4,
+                  "train.noise_velocity_fraction": 0.0,
+                  "train.fold_noise": False, "train.motion_weighting": 0.0,
+                  "train.pushforward_steps": 0}),
+    ("stride3", {"train.frame_stride": 3}),
+    ("sdf_only", {"model.boundary_particles": False}),
+    ("noise_folded", {"train.noise_velocity_fraction": 0.1,
+                      "train.fold_noise": True}),
+    ("motion_weighted", {"train.motion_weighting": 0.5}),
+    ("pushforward", {"train.pushforward_steps": 2,
+                     "train.pushforward_probability": 0.5}),
+)
+
+
+def ablation(data_dir: str, out_dir: str, *, minutes: float = 8.0,
+             variants: Sequence[str] | None = None,
+             max_trajectories: int | None = 7) -> list[dict]:
+  """Trains each cumulative variant of ``ABLATION`` for the same wall time
+  and scores whole rollouts of the test split (``max_trajectories``: the
+  first ones; the test split cycles its groups, so 7 is one per group).
+
+  Writes ``ablation.json`` and ``ablation.md`` in ``out_dir``; each
+  variant's run lives in ``out_dir/<name>`` (a rerun resumes or reuses it).
+  """
+  from experiments import evaluation  # pylint: disable=g-import-not-at-top
+  from experiments.configs import small  # pylint: disable=g-import-not-at-top
+  from gnsjax import train  # pylint: disable=g-import-not-at-top
+  known = [name for name, _ in ABLATION]
+  unknown = set(variants or ()) - set(known)
+  if unknown:
+    raise ValueError(f"variants {sorted(unknown)}; allowed: {known}")
+  os.makedirs(out_dir, exist_ok=True)
+  config = small.get_config()
+  config.train.num_steps = 10**7            # the time budget stops it
+  config.train.max_wall_time_s = minutes * 60
+  config.eval.every_steps = 0
+  config.checkpoint.named_steps = ()
+  rows = []
+  test_path = data.split_path(data_dir, "test")
+  for name, changes in ABLATION:
+    for key, value in changes.items():
+      section, field = key.split(".")
+      config[section][field] = value
+    if variants and name not in variants:
+      continue
+    workdir = os.path.join(out_dir, name)
+    train.train_and_evaluate(config, data_dir, workdir)
+    run = train.load_run(workdir)
+    results = evaluation.rollout_split(run, test_path, max_trajectories)
+    summary = evaluation.group_summary(
+        [evaluation.per_trajectory_row(r) for r in results])[0]
+    log = evaluation.read_csv(os.path.join(workdir, "metrics.csv"))
+    rows.append({"variant": name, "changes": changes, "steps": run.step,
+                 "train_minutes": float(log[-1]["wall_time_s"]) / 60
+                 if log else None, **summary})
+    mpm_io.write_json(os.path.join(out_dir, "ablation.json"), rows)
+  mpm_io.write_text(os.path.join(out_dir, "ablation.md"),
+                    ablation_table(rows))
+  return rows
+
+
+def ablation_table(rows: Sequence[dict]) -> str:
+  """The Markdown table of an ablation's rows."""
+  lines = ["| variant | steps | mean MSE (m^2) | const. vel. | median front "
+           "error | median deposit error (m) | inside (max) | free: inside "
+           "(max) | outside (max) | pushed/step |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+  for r in rows:
+    lines.append(
+        f"| {r['variant']} | {r['steps']} | {r['mean_mse']:.2e} | "
+        f"{r['mean_mse_constant_velocity']:.2e} | "
+        f"{r['median_front_error_relative']:.1%} | "
+        f"{r['median_deposit_error']:.4f} | {r['max_inside_solids']:.1%} | "
+        f"{r.get('free_max_inside_solids', float('nan')):.1%} | "
+        f"{r['max_outside_domain']:.1%} | {r['mean_pushed_fraction']:.2%} |")
+  return "\n".join(lines) + "\n"

@@ -1,9 +1,10 @@
 """Host-side assembly of training windows into padded batches (numpy).
 
-A window's nodes are its moving particles, then the boundary particles that
-are within the connectivity radius of a moving particle in the last input
-frame (the only boundary particles that get an edge: a scene pays only for
-what it contains), then padding. Each batch is padded to a multiple of
+A window's nodes are its moving particles, then (if boundary particles are
+modelled) the boundary particles that are within the connectivity radius of
+a moving particle in the last input frame (the only boundary particles that
+get an edge: a scene pays only for what it contains), then padding. Each
+window carries its scene's SDF grid, from which the model sees the solids. Each batch is padded to a multiple of
 ``node_bucket`` nodes so that training compiles a handful of times.
 
 Shapes: B windows, C + 1 frames (C inputs and the target), N padded nodes.
@@ -25,10 +26,12 @@ class Batch(NamedTuple):
       position, padding nodes sit at ``graph.parking_positions``.
     particle_type: int32 [B, N] (0 for padding).
     moving: bool [B, N], the particles the model predicts (loss, noise).
+    solids: float32 [B, Gx, Gy, 3] the windows' ``mpm.SDFGrid`` values.
   """
   positions: np.ndarray
   particle_type: np.ndarray
   moving: np.ndarray
+  solids: np.ndarray
 
 
 def near_boundary(moving: np.ndarray, boundary: np.ndarray,
@@ -57,24 +60,29 @@ def near_boundary(moving: np.ndarray, boundary: np.ndarray,
   return keep
 
 
-def window_nodes(window: data.Window, radius: float):
+def window_nodes(window: data.Window, radius: float, boundary: bool = True):
   """Nodes of one window: (positions [C + 1, n, 2], types [n], moving [n])."""
   frames = window.positions.shape[0]
-  keep = near_boundary(window.positions[-2], window.boundary_positions,
-                       radius)
-  boundary = window.boundary_positions[keep]
+  if boundary:
+    keep = near_boundary(window.positions[-2], window.boundary_positions,
+                         radius)
+  else:
+    keep = np.zeros(len(window.boundary_positions), bool)
+  fixed = window.boundary_positions[keep]
   positions = np.concatenate(
       [window.positions,
-       np.broadcast_to(boundary[None], (frames,) + boundary.shape)], 1)
+       np.broadcast_to(fixed[None], (frames,) + fixed.shape)], 1)
   types = np.concatenate([window.particle_type, window.boundary_type[keep]])
   moving = np.arange(len(types)) < window.positions.shape[1]
   return positions.astype(np.float32), types.astype(np.int32), moving
 
 
 def make_batch(windows: Sequence[data.Window], spec: graph.GraphSpec,
-               node_bucket: int = 128) -> Batch:
-  """Pads the windows' nodes to one bucketed count and stacks them."""
-  nodes = [window_nodes(w, spec.radius) for w in windows]
+               node_bucket: int = 128, boundary: bool = True,
+               sdf_spacing: float = 0.005) -> Batch:
+  """Pads the windows' nodes to one bucketed count and stacks them, with
+  each window's SDF grid at ``sdf_spacing`` (m)."""
+  nodes = [window_nodes(w, spec.radius, boundary) for w in windows]
   n = max(len(t) for _, t, _ in nodes)
   n = -(-n // node_bucket) * node_bucket
   positions, types, moving = [], [], []
@@ -85,5 +93,7 @@ def make_batch(windows: Sequence[data.Window], spec: graph.GraphSpec,
         [p, np.broadcast_to(park[None], (p.shape[0], k, 2))], 1))
     types.append(np.concatenate([t, np.zeros(k, np.int32)]))
     moving.append(np.concatenate([m, np.zeros(k, bool)]))
+  solids = np.stack([data.solids_of(w.scene, sdf_spacing).values
+                     for w in windows])
   return Batch(np.stack(positions).astype(np.float32), np.stack(types),
-               np.stack(moving))
+               np.stack(moving), solids)

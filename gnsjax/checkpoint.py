@@ -63,3 +63,14 @@ def read_stats(mngr: ocp.CheckpointManager, step: int) -> dict:
   """The normalisation statistics stored with a checkpoint."""
   return mngr.restore(step, args=ocp.args.Composite(
       stats=ocp.args.JsonRestore()))["stats"]
+
+
+def restore_params(mngr: ocp.CheckpointManager, abstract_params: Any,
+                   step: int) -> Any:
+  """Only the parameters of a checkpoint's train state (no optimiser), in
+  the structure of ``abstract_params``."""
+  import jax  # pylint: disable=g-import-not-at-top
+  restored = mngr.restore(step, args=ocp.args.Composite(
+      state=ocp.args.StandardRestore()))["state"]
+  return jax.tree.map(lambda like, value: jax.numpy.asarray(value, like.dtype),
+                      abstract_params, restored["params"])

@@ -1,15 +1,19 @@
 """Input features and targets of the learned simulator (pure functions).
 
-Shapes: C input frames (6), N nodes (moving particles first, then static
-boundary particles, then padding), E edges. Velocities and accelerations are
-finite differences per frame (m/frame, m/frame^2), normalised with the
-dataset's statistics.
+Shapes: C input frames (6), N nodes (moving particles first, then any static
+boundary particles, then padding), E edges. One *learned step* spans
+``frame_stride`` stored frames; velocities and accelerations are finite
+differences per learned step (m/step, m/step^2), normalised with statistics
+of the same stride.
 
-Node features: the last C - 1 velocities, normalised, flattened [N, 2(C-1)];
-then the distances to the four domain walls divided by the connectivity
-radius R and clipped to [-1, 1] [N, 4]. Edge features: the displacement
-x_sender - x_receiver divided by R [E, 2] and its norm [E, 1]. The particle
-type enters the model through a learned embedding.
+Node features [N, 2 (C - 1) + 3]: the last C - 1 velocities, normalised and
+flattened; then what the node sees of the solids, from the scene's signed
+distance field (``mpm.SDFGrid``: ramp, obstacles and the domain's walls):
+the signed distance phi / R clipped to [-1, 1], and the outward unit normal
+weighted by clip(1 - phi / R, 0, 1), which fades to zero at R so the
+features are continuous. Edge features: the displacement x_sender -
+x_receiver divided by the connectivity radius R [E, 2] and its norm [E, 1].
+The particle type enters the model through a learned embedding.
 """
 
 from typing import NamedTuple
@@ -17,13 +21,41 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from mpm import geometry
+
 
 class Stats(NamedTuple):
-  """Normalisation statistics, each [2] (see ``gnsjax.data.load_stats``)."""
+  """Normalisation statistics per learned step, each [2] (m/step, m/step^2).
+
+  Numpy arrays on the host (``gnsjax.data.load_stats``,
+  ``gnsjax.data.stride_stats``), jax arrays inside the model.
+  """
   vel_mean: jax.Array
   vel_std: jax.Array
   acc_mean: jax.Array
   acc_std: jax.Array
+
+
+def fold_noise(stats: Stats, noise_std: float) -> Stats:
+  """Statistics whose stds include the training noise: sqrt(std^2 + noise^2).
+
+  As in DeepMind's, geoelements' and LagrangeBench's GNS: the noisy inputs
+  the model sees in training, and the corrections it must learn, spread by
+  the noise as well as by the data.
+  """
+  grow = lambda std: (std**2 + noise_std**2)**0.5
+  return stats._replace(vel_std=grow(stats.vel_std),
+                        acc_std=grow(stats.acc_std))
+
+
+def solid_features(position: jax.Array, solids: geometry.SDFGrid,
+                   radius: float) -> jax.Array:
+  """[N, 3]: phi / R clipped to [-1, 1], and the outward normal [N, 2]
+  weighted by clip(1 - phi / R, 0, 1), at positions [N, 2] (m)."""
+  phi, normal = geometry.sample_sdf(solids, position)
+  near = jnp.clip(1.0 - phi / radius, 0.0, 1.0)
+  return jnp.concatenate([jnp.clip(phi / radius, -1.0, 1.0)[:, None],
+                          normal * near[:, None]], -1)
 
 
 def velocities(positions: jax.Array) -> jax.Array:
@@ -31,23 +63,26 @@ def velocities(positions: jax.Array) -> jax.Array:
   return positions[1:] - positions[:-1]
 
 
-def node_features(positions: jax.Array, stats: Stats, bounds: jax.Array,
-                  radius: float) -> jax.Array:
-  """Node features [N, 2 (C - 1) + 4].
+def node_features(positions: jax.Array, stats: Stats,
+                  solids: geometry.SDFGrid, radius: float) -> jax.Array:
+  """Node features [N, 2 (C - 1) + 3].
 
   Args:
     positions: [C, N, 2] input frames (m).
     stats: normalisation statistics.
-    bounds: [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m).
+    solids: the scene's signed distance field.
     radius: connectivity radius R (m).
   """
   v = (velocities(positions) - stats.vel_mean[None, None]) / stats.vel_std[
       None, None]
   v = jnp.transpose(v, (1, 0, 2)).reshape(positions.shape[1], -1)
-  last = positions[-1]
-  walls = jnp.concatenate([last - bounds[None, :, 0], bounds[None, :, 1] - last],
-                          -1)
-  return jnp.concatenate([v, jnp.clip(walls / radius, -1.0, 1.0)], -1)
+  return jnp.concatenate([v, solid_features(positions[-1], solids, radius)],
+                         -1)
+
+
+def num_node_features(input_frames: int) -> int:
+  """F of ``node_features`` for C = ``input_frames``."""
+  return 2 * (input_frames - 1) + 3
 
 
 def edge_features(position: jax.Array, senders: jax.Array,
@@ -74,7 +109,7 @@ def target_acceleration(positions: jax.Array, target: jax.Array,
 
 def integrate(positions: jax.Array, normalized_acc: jax.Array,
               stats: Stats) -> jax.Array:
-  """Next positions [N, 2] by semi-implicit Euler with dt = 1 frame.
+  """Next positions [N, 2] by semi-implicit Euler with dt = 1 learned step.
 
   v_{t+1} = (x_t - x_{t-1}) + a,  x_{t+1} = x_t + v_{t+1}.
   """

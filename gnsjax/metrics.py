@@ -8,9 +8,19 @@ Shapes: T steps, N sand particles. Positions in metres.
   smaller x), taken as a low quantile so one stray particle does not set it.
 - ``deposit_profile``: the top of the sand in bins along x; its error is the
   RMS height difference over the bins where either trajectory has sand.
+- ``inside_solids``, ``outside_domain``: the fraction of the sand deeper than
+  a tolerance inside the ramp or an obstacle, and outside the domain, per
+  step: a flow that leaks through a solid shows here even when its MSE is
+  small.
+- ``constant_velocity``: the baseline every learned model must beat.
 """
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+
+from mpm import geometry
+from mpm import scene as scene_lib
 
 FRONT_QUANTILE = 0.01
 
@@ -60,3 +70,60 @@ def deposit_error(pred: np.ndarray, true: np.ndarray,
   a = np.where(np.isnan(a), floor, a)[either]
   b = np.where(np.isnan(b), floor, b)[either]
   return float(np.sqrt(np.mean((a - b)**2)))
+
+
+@jax.jit
+def _solid_sdf(ramp, obstacles, p):
+  return geometry.solid_sdf(ramp, obstacles, p)
+
+
+def solid_distance(positions: np.ndarray, scene: scene_lib.Scene) -> np.ndarray:
+  """Exact signed distance [...] (m) to the scene's ramp and obstacles at
+  positions [..., 2] (negative inside)."""
+  p = np.asarray(positions, np.float32)
+  phi = _solid_sdf(geometry.ramp_params(scene.ramp),
+                   tuple(geometry.obstacle_params(o) for o in scene.obstacles),
+                   jnp.asarray(p.reshape(-1, 2)))
+  return np.asarray(phi).reshape(p.shape[:-1])
+
+
+def inside_solids(positions: np.ndarray, scene: scene_lib.Scene,
+                  tolerance: float | None = None) -> np.ndarray:
+  """Fraction [T] of the sand deeper than ``tolerance`` (default: half the
+  particle spacing) inside the ramp or an obstacle, of [T, N, 2]."""
+  if tolerance is None:
+    tolerance = scene.granular.spacing / 2
+  return np.mean(solid_distance(positions, scene) < -tolerance, -1)
+
+
+def outside_domain(positions: np.ndarray, scene: scene_lib.Scene,
+                   tolerance: float | None = None) -> np.ndarray:
+  """Fraction [T] of the sand more than ``tolerance`` (default: half the
+  particle spacing) outside the domain's box, of [T, N, 2]."""
+  if tolerance is None:
+    tolerance = scene.granular.spacing / 2
+  d = geometry.domain_sdf(scene.domain.width, scene.domain.height,
+                          np.asarray(positions))
+  return np.mean(np.asarray(d) < -tolerance, -1)
+
+
+def constant_velocity(positions: np.ndarray, frames: np.ndarray,
+                      input_frames: int, frame_stride: int = 1) -> np.ndarray:
+  """The constant-velocity baseline [T, N, 2] at stored ``frames`` [T].
+
+  The velocity of the last two input frames, (C - 2) k and (C - 1) k, of a
+  trajectory [F, N, 2] carried on unchanged.
+  """
+  k = frame_stride
+  last = (input_frames - 1) * k
+  v = (positions[last] - positions[last - k]) / k
+  steps = (np.asarray(frames) - last)[:, None, None]
+  return positions[last][None] + v[None] * steps
+
+
+def front_error_relative(pred: np.ndarray, true: np.ndarray,
+                         start: np.ndarray) -> float:
+  """|front_pred - front_true| of two frames [N, 2] over the true front's
+  runout distance from the first frame ``start`` [N, 2] (a fraction)."""
+  travelled = abs(float(runout(true) - runout(start)))
+  return abs(float(runout(pred) - runout(true))) / max(travelled, 1e-9)

@@ -172,3 +172,13 @@ def split_to_concat_params(block_params: dict) -> dict:
     else:
       edge_mlp[name] = value
   return {"edge_mlp": edge_mlp, "node_mlp": block_params["node_mlp"]}
+
+
+def init_params(model: EncodeProcessDecode, key: jax.Array,
+                num_node_features: int):
+  """Parameters of ``model`` for node features [N, num_node_features]
+  (``features.num_node_features``); shapes do not depend on N or E."""
+  n = e = 8
+  return model.init(key, jnp.zeros((n, num_node_features)),
+                    jnp.zeros((n,), jnp.int32), jnp.zeros((e, 3)),
+                    jnp.zeros((e,), jnp.int32), jnp.zeros((e,), jnp.int32))

@@ -1,32 +1,40 @@
 """Rollouts of the learned simulator under ``lax.scan``.
 
-The neighbour list is updated inside the scan at every step, with a static
-capacity. If it overflows at step k, steps k and later of that chunk are
-discarded; the host reallocates a larger list from the last good positions and
-resumes from step k. The result therefore equals a rollout that had enough
-capacity from the start (tested). Rollouts run in chunks of a fixed number of
-steps, so one compiled program serves any length.
+``unroll`` is the one pure engine: ``length`` learned steps from a window,
+the neighbour list updated inside the scan at every step with a static
+capacity, the solid constraint applied after each step (``project``). Its
+callers jit it with explicit static arguments: the host drivers below,
+inverse design and multi-step training.
+
+The drivers (``rollout``, ``rollout_batch``) run ``unroll`` in chunks of a
+fixed number of steps, so one compiled program serves any length. If the
+neighbour list overflows at step k, steps k and later of that chunk are
+discarded; the host reallocates a larger list from the last good positions
+and resumes from step k. The result therefore equals a rollout that had
+enough capacity from the start (tested).
 
 ``rollout_batch`` runs B scenes at once: each is padded to the largest node
 count with padding nodes parked on ``graph.parking_positions`` (not moving,
 so they keep still and get only their self-edge), and the scan body vmaps the
-list update and the step over the scenes. Both share the chunk, overflow and
-resume loop (``_run_chunks``) and the scan (``_scan``); a batched overflow in
-any scene rewinds all of them to the same step.
+list update and the step over the scenes; a batched overflow in any scene
+rewinds all of them to the same step.
 
-Shapes: C input frames, N nodes (moving particles, then static boundary
-particles), T steps, B scenes (batched rollouts carry frames as [C, B, N, 2]).
+Shapes: C input frames, N nodes (moving particles, then any static boundary
+particles), T learned steps, B scenes (batched rollouts carry frames as
+[C, B, N, 2]). One learned step spans ``frame_stride`` stored frames.
 """
 
 import functools
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gnsjax import data
 from gnsjax import graph
 from gnsjax import simulator
+from mpm import geometry
 from mpm import io as mpm_io
 
 # Type id of the padding nodes of a batched rollout (any valid id: they do not
@@ -34,50 +42,94 @@ from mpm import io as mpm_io
 _PADDING_TYPE = 0
 
 
-@functools.partial(jax.jit,
-                   static_argnames=("predictor", "spec", "length", "batched"))
-def _scan(predictor, params, window, types, moving, nbrs, context, spec,
-          length, batched=False):
-  """``length`` steps from ``window`` [C, N, 2] (batched: [C, B, N, 2]).
+class SceneNodes(NamedTuple):
+  """A scene's start, as a rollout takes it (host arrays).
 
-  Returns positions [L, N, 2] (batched: [L, B, N, 2]), overflow flags [L]
-  (batched: of any scene) and the last neighbour list. ``types`` and
-  ``moving`` are [N] (batched: [B, N]); ``nbrs`` comes from
-  ``graph.allocate`` (batched: ``graph.allocate_batch``).
+  Attributes:
+    window: float32 [C, N, 2] input frames (m); static nodes repeat their
+      position.
+    types: int32 [N]; moving: bool [N].
+    solids: the scene's signed distance field.
+  """
+  window: np.ndarray
+  types: np.ndarray
+  moving: np.ndarray
+  solids: geometry.SDFGrid
+
+
+class Rollout(NamedTuple):
+  """A rollout's result.
+
+  Attributes:
+    positions: float32 [T, N, 2] predicted positions (m).
+    pushed: int32 [T] moving nodes the solid constraint pushed out per step.
+    depth: float32 [T] the deepest of them before the push (m).
+  """
+  positions: np.ndarray
+  pushed: np.ndarray
+  depth: np.ndarray
+
+
+def unroll(predictor, params, window: jax.Array, types: jax.Array,
+           moving: jax.Array, solids: geometry.SDFGrid, nbrs,
+           context: simulator.Context, spec: graph.GraphSpec, length: int,
+           project: bool = True, batched: bool = False):
+  """``length`` learned steps from ``window`` (pure; jit it with
+  ``predictor``, ``spec``, ``length``, ``project`` and ``batched`` static).
+
+  Args:
+    predictor, params: the simulator (``simulator.ModelPredictor``).
+    window: [C, N, 2] input frames (batched: [C, B, N, 2]).
+    types: int32 [N]; moving: bool [N] (batched: [B, N]).
+    solids: the scene's SDF grid (batched: values [B, Gx, Gy, 3]).
+    nbrs: from ``graph.allocate`` (batched: ``graph.allocate_batch``).
+    context: statistics and bounds; spec: graph settings.
+    length: L steps.
+    project: keep sand out of solids (``simulator.constrain``).
+    batched: whether the scene axis B is there.
+
+  Returns:
+    (positions [L, (B,) N, 2], carried [L, (B,) N, 2] the last input frame
+    of each step as the constraint left it, overflow bool [L] (of any
+    scene), the last neighbour list, Projection with [L, (B,)] fields).
   """
   n = window.shape[-2]
 
-  def advance(w, nb, ty, mv):
+  def advance(w, nb, ty, mv, so):
     senders, receivers = graph.edges(nb, n)
-    return simulator.step(predictor, params, w, ty, mv, senders, receivers,
-                          context, spec.radius)
+    g = simulator.Graph(w, ty, mv, senders, receivers, so)
+    return simulator.step(predictor, params, g, context, spec.radius,
+                          project)
 
   if batched:
     update = functools.partial(graph.update_batch, spec)
     # Frames stay time-major, so the scene axis of the window is 1.
-    advance = jax.vmap(advance, in_axes=(1, 0, 0, 0))
+    advance = jax.vmap(advance, in_axes=(1, 0, 0, 0, 0), out_axes=(0, 0, 0))
   else:
     update = functools.partial(graph.update, spec)
 
   def body(carry, _):
     w, nb = carry
     nb = update(w[-1], nb)
-    nxt = advance(w, nb, types, moving)
-    w = jnp.concatenate([w[1:], nxt[None]], 0)
-    return (w, nb), (nxt, jnp.any(nb.did_buffer_overflow))
+    nxt, last, info = advance(w, nb, types, moving, solids)
+    w = jnp.concatenate([w[1:-1], last[None], nxt[None]], 0)
+    return (w, nb), (nxt, last, jnp.any(nb.did_buffer_overflow), info)
 
-  (_, nbrs), (positions, overflow) = jax.lax.scan(
+  (_, nbrs), (positions, carried, overflow, info) = jax.lax.scan(
       body, (window, nbrs), None, length=length)
-  return positions, overflow, nbrs
+  return positions, carried, overflow, nbrs, info
+
+
+_unroll = jax.jit(unroll, static_argnames=("predictor", "spec", "length",
+                                           "project", "batched"))
 
 
 def _run_chunks(scan: Callable, allocate: Callable, window: np.ndarray, nbrs,
-                n_steps: int, chunk: int, on_reallocate=None) -> np.ndarray:
+                n_steps: int, chunk: int, on_reallocate=None):
   """The host loop of a rollout: chunks of scans, rewound on overflow.
 
   Args:
-    scan: (window, nbrs) -> (positions [chunk, ...], overflow [chunk], nbrs),
-      ``_scan`` with everything else bound.
+    scan: (window, nbrs) -> ``unroll``'s outputs, everything else bound.
     allocate: last frame -> a neighbour list sized for it.
     window: [C, ...] float32 input frames, time first.
     nbrs: the initial neighbour list.
@@ -85,19 +137,25 @@ def _run_chunks(scan: Callable, allocate: Callable, window: np.ndarray, nbrs,
     on_reallocate: called with the step at which a reallocation happened.
 
   Returns:
-    float32 [T, ...] positions.
+    (positions float32 [T, ...], pushed int32 [T, ...], depth [T, ...]).
   """
-  out = [np.zeros((0,) + window.shape[1:], np.float32)]
+  out, pushed, depth = [], [], []
   done = 0
   rewound = False
   while done < n_steps:
-    positions, overflow, new_nbrs = scan(jnp.asarray(window), nbrs)
-    positions, overflow = np.asarray(positions), np.asarray(overflow)
+    positions, carried, overflow, new_nbrs, info = scan(jnp.asarray(window),
+                                                        nbrs)
+    positions, carried, overflow = map(np.asarray,
+                                       (positions, carried, overflow))
     good = int(np.argmax(overflow)) if overflow.any() else chunk
     good = min(good, n_steps - done)
     if good:
       out.append(positions[:good])
-      window = np.concatenate([window, positions[:good]])[-window.shape[0]:]
+      pushed.append(np.asarray(info.count)[:good])
+      depth.append(np.asarray(info.depth)[:good])
+      # The carried window: constrained earlier frames, then the last output.
+      window = np.concatenate([window[:-1], carried[:good],
+                               positions[good - 1:good]])[-window.shape[0]:]
       done += good
     if overflow.any() and done < n_steps and good < chunk:
       # A list allocated for these very positions holds their edges, so a
@@ -112,15 +170,16 @@ def _run_chunks(scan: Callable, allocate: Callable, window: np.ndarray, nbrs,
     else:
       nbrs = new_nbrs
       rewound = False
-  return np.concatenate(out)[:n_steps]
+  return (np.concatenate(out)[:n_steps], np.concatenate(pushed)[:n_steps],
+          np.concatenate(depth)[:n_steps])
 
 
-def _check_scene(window, types, moving, where: str):
-  """(window [C, N, 2] float32, types [N] int32, moving [N] bool) of one
-  scene, or a ValueError naming ``where`` and the problem."""
-  window = np.asarray(window, np.float32)
-  types = np.asarray(types)
-  moving = np.asarray(moving)
+def _check_scene(scene: SceneNodes, where: str) -> SceneNodes:
+  """The scene with host arrays of the right dtypes, or a ValueError naming
+  ``where`` and the problem."""
+  window = np.asarray(scene.window, np.float32)
+  types = np.asarray(scene.types)
+  moving = np.asarray(scene.moving)
   if window.ndim != 3 or window.shape[-1] != 2 or not all(window.shape):
     raise ValueError(f"{where}: window must be [C, N, 2] with C, N >= 1; got "
                      f"shape {window.shape}")
@@ -131,49 +190,53 @@ def _check_scene(window, types, moving, where: str):
   if moving.shape != (n,):
     raise ValueError(f"{where}: moving must be [N] = [{n}]; got shape "
                      f"{moving.shape}")
-  return window, types.astype(np.int32), moving.astype(bool)
+  values = np.asarray(scene.solids.values, np.float32)
+  if values.ndim != 3 or values.shape[-1] != 3:
+    raise ValueError(f"{where}: solids.values must be [Gx, Gy, 3]; got "
+                     f"shape {values.shape}")
+  return SceneNodes(window, types.astype(np.int32), moving.astype(bool),
+                    scene.solids.replace(values=values))
 
 
-def rollout(predictor, params, window: np.ndarray, types: np.ndarray,
-            moving: np.ndarray, n_steps: int, context: simulator.Context,
-            spec: graph.GraphSpec, chunk: int = 50, nbrs=None,
-            on_reallocate=None) -> np.ndarray:
-  """Predicts ``n_steps`` frames after ``window``.
+def rollout(predictor, params, scene: SceneNodes, n_steps: int,
+            context: simulator.Context, spec: graph.GraphSpec,
+            project: bool = True, chunk: int = 50, nbrs=None,
+            on_reallocate=None) -> Rollout:
+  """Predicts ``n_steps`` learned steps after a scene's window.
 
   Args:
     predictor, params: the simulator (``simulator.ModelPredictor(model)``
       and its parameters, or any predictor).
-    window: [C, N, 2] input frames (m); static nodes repeat their position.
-    types: int32 [N]; moving: bool [N].
+    scene: the start (``trajectory_nodes``).
     n_steps: T.
     context: statistics and bounds; spec: graph settings.
+    project: keep sand out of solids after each step.
     chunk: steps per compiled scan.
-    nbrs: an initial neighbour list (default: allocated from ``window``).
+    nbrs: an initial neighbour list (default: allocated from the window).
     on_reallocate: called with the step at which a reallocation happened.
 
-  Returns:
-    float32 [T, N, 2] predicted positions.
-
   Raises:
-    ValueError: when the shapes of window, types and moving disagree.
+    ValueError: when the scene's shapes disagree.
   """
-  window, types, moving = _check_scene(window, types, moving, "rollout")
+  window, types, moving, solids = _check_scene(scene, "rollout")
   allocate = functools.partial(graph.allocate, spec)
   if nbrs is None:
     nbrs = allocate(jnp.asarray(window[-1]))
   scan = functools.partial(
-      _scan, predictor, params, types=jnp.asarray(types),
-      moving=jnp.asarray(moving), context=context, spec=spec, length=chunk)
-  return _run_chunks(lambda w, nb: scan(window=w, nbrs=nb), allocate, window,
-                     nbrs, n_steps, chunk, on_reallocate)
+      _unroll, predictor, params, types=jnp.asarray(types),
+      moving=jnp.asarray(moving), solids=jax.tree.map(jnp.asarray, solids),
+      context=context, spec=spec, length=chunk, project=project)
+  return Rollout(*_run_chunks(lambda w, nb: scan(window=w, nbrs=nb),
+                              allocate, window, nbrs, n_steps, chunk,
+                              on_reallocate))
 
 
-def rollout_batch(predictor, params, windows: Sequence[np.ndarray],
-                  types: Sequence[np.ndarray], moving: Sequence[np.ndarray],
+def rollout_batch(predictor, params, scenes: Sequence[SceneNodes],
                   n_steps: int, context: simulator.Context,
-                  spec: graph.GraphSpec, chunk: int = 50, on_reallocate=None,
-                  nbrs=None) -> list[np.ndarray]:
-  """Predicts ``n_steps`` frames after each of B scenes' windows, at once.
+                  spec: graph.GraphSpec, project: bool = True,
+                  chunk: int = 50, on_reallocate=None,
+                  nbrs=None) -> list[Rollout]:
+  """Predicts ``n_steps`` learned steps after each of B scenes, at once.
 
   Every scene is padded to N = max N_b nodes, with padding nodes on
   ``graph.parking_positions`` that do not move and get only their self-edge,
@@ -183,40 +246,41 @@ def rollout_batch(predictor, params, windows: Sequence[np.ndarray],
 
   Args:
     predictor, params: the simulator, shared by all scenes.
-    windows: B arrays [C, N_b, 2] of input frames (m), one C for all.
-    types: B int32 arrays [N_b]; moving: B bool arrays [N_b].
+    scenes: B starts, one C for all, SDF grids of one shape.
     n_steps: T.
     context: statistics and bounds; spec: graph settings. At most
       ``spec.max_padding`` padding nodes fit one scene.
+    project: keep sand out of solids after each step.
     chunk: steps per compiled scan.
     on_reallocate: called with the step at which a reallocation happened.
     nbrs: an initial batched list from ``graph.allocate_batch`` of [B, N, 2]
       padded positions (default: allocated from the windows).
 
   Returns:
-    B float32 arrays [T, N_b, 2] of predicted positions, padding removed.
+    B ``Rollout``s, padding removed.
 
   Raises:
-    ValueError: when the lists differ in length or are empty, or a scene's
-      shapes are wrong or its C differs from the first scene's.
+    ValueError: when there are no scenes, or a scene's shapes are wrong, or
+      its C or SDF grid shape differs from the first scene's.
   """
-  if not len(windows) == len(types) == len(moving):
-    raise ValueError("rollout_batch: windows, types and moving must be lists "
-                     f"of one length (one entry per scene); got {len(windows)}"
-                     f", {len(types)} and {len(moving)}")
-  if not windows:
+  if not scenes:
     raise ValueError("rollout_batch: no scenes")
-  scenes = [_check_scene(w, t, m, f"rollout_batch: scene {b}")
-            for b, (w, t, m) in enumerate(zip(windows, types, moving))]
-  c = scenes[0][0].shape[0]
-  for b, (w, _, _) in enumerate(scenes):
-    if w.shape[0] != c:
-      raise ValueError(f"rollout_batch: scene {b} has {w.shape[0]} input "
-                       f"frames; scene 0 has {c}")
-  sizes = [len(t) for _, t, _ in scenes]
+  scenes = [_check_scene(sc, f"rollout_batch: scene {b}")
+            for b, sc in enumerate(scenes)]
+  c = scenes[0].window.shape[0]
+  for b, sc in enumerate(scenes):
+    if sc.window.shape[0] != c:
+      raise ValueError(f"rollout_batch: scene {b} has {sc.window.shape[0]} "
+                       f"input frames; scene 0 has {c}")
+    if sc.solids.values.shape != scenes[0].solids.values.shape:
+      raise ValueError(f"rollout_batch: scene {b}'s SDF grid is "
+                       f"{sc.solids.values.shape}; scene 0's is "
+                       f"{scenes[0].solids.values.shape} (one domain and "
+                       "grid spacing for all)")
+  sizes = [len(sc.types) for sc in scenes]
   n = max(sizes)
   padded_w, padded_t, padded_m = [], [], []
-  for w, t, m in scenes:
+  for w, t, m, _ in scenes:
     k = n - len(t)
     park = graph.parking_positions(k, spec)
     padded_w.append(np.concatenate(
@@ -224,36 +288,78 @@ def rollout_batch(predictor, params, windows: Sequence[np.ndarray],
     padded_t.append(np.concatenate([t, np.full(k, _PADDING_TYPE, np.int32)]))
     padded_m.append(np.concatenate([m, np.zeros(k, bool)]))
   window = np.stack(padded_w, 1)                          # [C, B, N, 2]
+  solids = scenes[0].solids.replace(
+      values=jnp.asarray(np.stack([sc.solids.values for sc in scenes])))
   allocate = functools.partial(graph.allocate_batch, spec)
   if nbrs is None:
     nbrs = allocate(jnp.asarray(window[-1]))
   scan = functools.partial(
-      _scan, predictor, params, types=jnp.asarray(np.stack(padded_t)),
-      moving=jnp.asarray(np.stack(padded_m)), context=context, spec=spec,
-      length=chunk, batched=True)
-  out = _run_chunks(lambda w, nb: scan(window=w, nbrs=nb), allocate, window,
-                    nbrs, n_steps, chunk, on_reallocate)
-  return [np.ascontiguousarray(out[:, b, :size])
+      _unroll, predictor, params, types=jnp.asarray(np.stack(padded_t)),
+      moving=jnp.asarray(np.stack(padded_m)), solids=solids, context=context,
+      spec=spec, length=chunk, project=project, batched=True)
+  positions, pushed, depth = _run_chunks(
+      lambda w, nb: scan(window=w, nbrs=nb), allocate, window, nbrs, n_steps,
+      chunk, on_reallocate)
+  return [Rollout(np.ascontiguousarray(positions[:, b, :size]),
+                  pushed[:, b], depth[:, b])
           for b, size in enumerate(sizes)]
 
 
-def trajectory_nodes(t: mpm_io.Trajectory, input_frames: int):
-  """(window [C, N, 2], types [N], moving [N]) of a stored trajectory's
-  start: its sand then all its boundary particles."""
-  sand = t.positions[:input_frames]
-  boundary = np.broadcast_to(t.boundary_positions[None],
-                             (input_frames,) + t.boundary_positions.shape)
-  window = np.concatenate([sand, boundary], 1)
-  types = np.concatenate([t.particle_type, t.boundary_type]).astype(np.int32)
-  moving = np.arange(len(types)) < t.positions.shape[1]
-  return window, types, moving
+def input_frame_indices(input_frames: int, frame_stride: int) -> np.ndarray:
+  """Stored frames [C] a rollout starts from: 0, k, ..., (C - 1) k."""
+  return np.arange(input_frames) * frame_stride
+
+
+def predicted_frame_indices(n_frames: int, input_frames: int,
+                            frame_stride: int) -> np.ndarray:
+  """Stored frames [T] a rollout from ``input_frame_indices`` predicts:
+  (C - 1 + t) k for t = 1 .. T, every one before ``n_frames``."""
+  first = (input_frames - 1) * frame_stride
+  return np.arange(first + frame_stride, n_frames, frame_stride)
+
+
+def trajectory_nodes(t: mpm_io.Trajectory, input_frames: int,
+                     frame_stride: int = 1, boundary: bool = True,
+                     sdf_spacing: float = 0.005) -> SceneNodes:
+  """The start of a stored trajectory: its sand at frames 0, k, ...,
+  (C - 1) k, then (if ``boundary``) its boundary particles as static nodes,
+  and its scene's SDF grid at ``sdf_spacing`` (m)."""
+  sand = t.positions[input_frame_indices(input_frames, frame_stride)]
+  n_sand = t.positions.shape[1]
+  if boundary:
+    fixed = np.broadcast_to(t.boundary_positions[None],
+                            (input_frames,) + t.boundary_positions.shape)
+    window = np.concatenate([sand, fixed], 1)
+    types = np.concatenate([t.particle_type, t.boundary_type])
+  else:
+    window, types = sand, t.particle_type
+  moving = np.arange(len(types)) < n_sand
+  return SceneNodes(window.astype(np.float32), types.astype(np.int32), moving,
+                    data.solids_of(t.scene, sdf_spacing))
 
 
 def rollout_trajectory(model, params, t: mpm_io.Trajectory, problem,
-                       n_steps: int, input_frames: int) -> np.ndarray:
-  """Predicted sand positions [n_steps, Ns, 2] from a trajectory's first
-  ``input_frames`` frames."""
-  window, types, moving = trajectory_nodes(t, input_frames)
-  pred = rollout(simulator.ModelPredictor(model), params, window, types,
-                 moving, n_steps, problem.context, problem.spec)
-  return pred[:, :t.positions.shape[1]]
+                       n_steps: int | None = None,
+                       project: bool = True) -> Rollout:
+  """A stored trajectory rolled out from its start by a trained model.
+
+  Args:
+    model, params: the network and its parameters.
+    t: the trajectory (its first (C - 1) k + 1 frames are the inputs).
+    problem: the run's ``train.Problem`` (stride, features, statistics).
+    n_steps: learned steps (default: as many as the trajectory has frames
+      for, ``predicted_frame_indices``).
+    project: keep sand out of solids.
+
+  Returns:
+    The sand's ``Rollout`` (boundary nodes removed); step t is stored frame
+    ``predicted_frame_indices(...)[t]``.
+  """
+  c, k = problem.input_frames, problem.frame_stride
+  if n_steps is None:
+    n_steps = len(predicted_frame_indices(len(t.positions), c, k))
+  scene = trajectory_nodes(t, c, k, problem.boundary_particles,
+                           problem.sdf_spacing)
+  out = rollout(simulator.ModelPredictor(model), params, scene, n_steps,
+                problem.context, problem.spec, project=project)
+  return out._replace(positions=out.positions[:, :t.positions.shape[1]])

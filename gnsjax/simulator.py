@@ -1,7 +1,8 @@
 """The learned simulator on one window: graph, features, model, loss, step.
 
 Pure functions of arrays; the caller jits them. Shapes: C input frames,
-N nodes (padded), E edges (capacity of the neighbour list).
+N nodes (padded), E edges (capacity of the neighbour list), Gx x Gy nodes of
+the scene's signed distance grid.
 """
 
 import dataclasses
@@ -13,55 +14,129 @@ import jax.numpy as jnp
 from gnsjax import features
 from gnsjax import models
 from gnsjax import noise as noise_lib
+from mpm import geometry
 
 
 class Context(NamedTuple):
-  """What the model needs besides the state (all traced arrays).
+  """What the model needs besides the window (traced arrays).
 
   Attributes:
-    stats: normalisation statistics.
+    stats: normalisation statistics per learned step (noise folded in if
+      the run was trained so).
     bounds: [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m).
   """
   stats: features.Stats
   bounds: jax.Array
 
 
-def predict(model: models.EncodeProcessDecode, params, positions: jax.Array,
-            particle_type: jax.Array, senders: jax.Array,
-            receivers: jax.Array, context: Context,
-            radius: float) -> jax.Array:
-  """Normalised accelerations [N, 2] from input positions [C, N, 2]."""
-  node_f = features.node_features(positions, context.stats, context.bounds,
-                                  radius)
-  edge_f = features.edge_features(positions[-1], senders, receivers, radius)
-  return model.apply(params, node_f, particle_type, edge_f, senders,
-                     receivers)
+class Graph(NamedTuple):
+  """One window as the model sees it (a pytree; jraph's GraphsTuple holds
+  latents, this holds the physical inputs they are encoded from).
+
+  Attributes:
+    positions: [C, N, 2] input frames (m); static nodes repeat their position.
+    particle_type: int32 [N].
+    moving: bool [N], the nodes the model advances (sand).
+    senders, receivers: int32 [E] edges of the last frame; padding entries
+      point one past the last node.
+    solids: the scene's signed distance field (values [Gx, Gy, 3]).
+  """
+  positions: jax.Array
+  particle_type: jax.Array
+  moving: jax.Array
+  senders: jax.Array
+  receivers: jax.Array
+  solids: geometry.SDFGrid
+
+
+def predict(model: models.EncodeProcessDecode, params, graph: Graph,
+            context: Context, radius: float) -> jax.Array:
+  """Normalised accelerations [N, 2] of a window."""
+  node_f = features.node_features(graph.positions, context.stats,
+                                  graph.solids, radius)
+  edge_f = features.edge_features(graph.positions[-1], graph.senders,
+                                  graph.receivers, radius)
+  return model.apply(params, node_f, graph.particle_type, edge_f,
+                     graph.senders, graph.receivers)
 
 
 @dataclasses.dataclass(frozen=True)
 class ModelPredictor:
   """Predictor of normalised accelerations by the learned model.
 
-  A predictor is a hashable callable
-  ``(params, positions [C, N, 2], particle_type, senders, receivers, context,
-  radius) -> [N, 2]``; rollouts take it as a static argument, so the same
-  machinery runs the model, or an oracle in tests.
+  A predictor is a hashable callable ``(params, graph, context, radius) ->
+  [N, 2]``; rollouts take it as a static argument, so the same machinery runs
+  the model, or an oracle in tests.
   """
   model: models.EncodeProcessDecode
 
-  def __call__(self, params, positions, particle_type, senders, receivers,
-               context, radius):
-    return predict(self.model, params, positions, particle_type, senders,
-                   receivers, context, radius)
+  def __call__(self, params, graph, context, radius):
+    return predict(self.model, params, graph, context, radius)
 
 
-def step(predictor, params, positions, particle_type, moving, senders,
-         receivers, context, radius) -> jax.Array:
-  """Next positions [N, 2]: moving nodes advance, the others stay."""
-  acc = predictor(params, positions, particle_type, senders, receivers,
-                  context, radius)
-  nxt = features.integrate(positions, acc, context.stats)
-  return jnp.where(moving[:, None], nxt, positions[-1])
+class Projection(NamedTuple):
+  """How the solid constraint acted in one step.
+
+  Attributes:
+    count: [] int32, moving nodes pushed out of a solid.
+    depth: [] float32, the deepest of them before the push (m, >= 0).
+  """
+  count: jax.Array
+  depth: jax.Array
+
+
+def constrain(previous: jax.Array, proposed: jax.Array, moving: jax.Array,
+              solids: geometry.SDFGrid):
+  """Keeps sand out of solids: the MPM's push-out, for a learned step.
+
+  A moving node whose proposed position is inside a solid (phi < 0: ramp,
+  obstacle, outside the domain) moves back to the surface along the outward
+  normal, and the inward normal part of its last displacement is removed
+  (its previous position slides along the normal, so the next step's input
+  velocity has none). Differentiable; nodes outside solids are untouched.
+
+  Args:
+    previous: [N, 2] positions before the step (m).
+    proposed: [N, 2] positions the model predicts (m).
+    moving: bool [N]; static nodes are never moved.
+    solids: the scene's signed distance field.
+
+  Returns:
+    (positions [N, 2], previous [N, 2], Projection).
+  """
+  phi, normal = geometry.sample_sdf(solids, proposed)
+  inside = moving & (phi < 0)
+  normal = normal * inside[:, None]
+  positions = geometry.push_out(proposed, phi, normal)
+  v_n = jnp.sum((positions - previous) * normal, -1)
+  previous = previous + jnp.minimum(v_n, 0.0)[:, None] * normal
+  info = Projection(jnp.sum(inside).astype(jnp.int32),
+                    jnp.max(jnp.where(inside, -phi, 0.0), initial=0.0))
+  return positions, previous, info
+
+
+def step(predictor, params, graph: Graph, context: Context, radius: float,
+         project: bool = True):
+  """One learned step.
+
+  Args:
+    predictor, params: the simulator.
+    graph: the window.
+    context: statistics and bounds.
+    radius: connectivity radius R (m).
+    project: apply ``constrain`` (static).
+
+  Returns:
+    (next positions [N, 2], last input frame [N, 2] (changed by the
+    constraint), Projection). Static nodes stay where they are.
+  """
+  acc = predictor(params, graph, context, radius)
+  last = graph.positions[-1]
+  nxt = features.integrate(graph.positions, acc, context.stats)
+  nxt = jnp.where(graph.moving[:, None], nxt, last)
+  if not project:
+    return nxt, last, Projection(jnp.zeros((), jnp.int32), jnp.zeros(()))
+  return constrain(last, nxt, graph.moving, graph.solids)
 
 
 def add_noise(key: jax.Array, window: jax.Array, moving: jax.Array,
@@ -78,11 +153,14 @@ def add_noise(key: jax.Array, window: jax.Array, moving: jax.Array,
   return inputs + n, noise_lib.adjust_target(target, n)
 
 
-def loss(model, params, inputs, target, particle_type, moving, senders,
-         receivers, context, radius) -> jax.Array:
-  """MSE of normalised acceleration over the moving particles []."""
-  acc = predict(model, params, inputs, particle_type, senders, receivers,
-                context, radius)
-  want = features.target_acceleration(inputs, target, context.stats)
-  err = jnp.sum((acc - want)**2, -1) * moving
-  return jnp.sum(err) / jnp.maximum(jnp.sum(moving), 1) / 2
+def loss(model, params, graph: Graph, target: jax.Array, context: Context,
+         radius: float) -> jax.Array:
+  """MSE of normalised acceleration over the moving particles [].
+
+  Args:
+    graph: the window's (noisy) inputs; target: [N, 2] next positions (m).
+  """
+  acc = predict(model, params, graph, context, radius)
+  want = features.target_acceleration(graph.positions, target, context.stats)
+  err = jnp.sum((acc - want)**2, -1) * graph.moving
+  return jnp.sum(err) / jnp.maximum(jnp.sum(graph.moving), 1) / 2

@@ -18,7 +18,7 @@ import functools
 import json
 import os
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 from absl import logging
 import flax
@@ -35,9 +35,11 @@ from gnsjax import checkpoint
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
+from gnsjax import metrics as metrics_lib
 from gnsjax import models
 from gnsjax import rollout as rollout_lib
 from gnsjax import simulator
+from mpm import geometry as mpm_geometry
 from mpm import io as mpm_io
 
 
@@ -79,11 +81,29 @@ def create_optimizer(train_config) -> optax.GradientTransformation:
 
 @dataclasses.dataclass(frozen=True)
 class Problem:
-  """What the dataset fixes: statistics, domain, radius (host values)."""
+  """What the data and the config fix for a model (host values).
+
+  Attributes:
+    stats: normalisation statistics per learned step, the training noise
+      folded in if the run was trained so (what the model divides by).
+    bounds: [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m).
+    radius: connectivity radius R (m).
+    spec: the radius graph's static description.
+    input_frames: C.
+    frame_stride: k, stored frames per learned step.
+    boundary_particles: whether boundary particles are graph nodes.
+    sdf_spacing: node spacing of the scenes' SDF grids (m).
+    noise_std: training noise, std of the last input velocity (m/step).
+  """
   stats: features.Stats
   bounds: np.ndarray
   radius: float
   spec: graph.GraphSpec
+  input_frames: int = 6
+  frame_stride: int = 1
+  boundary_particles: bool = True
+  sdf_spacing: float = 0.005
+  noise_std: float = 0.0
 
   @property
   def context(self) -> simulator.Context:
@@ -91,41 +111,68 @@ class Problem:
         features.Stats(*(jnp.asarray(s) for s in self.stats)),
         jnp.asarray(self.bounds, jnp.float32))
 
-  def stats_dict(self) -> dict:
-    return {k: np.asarray(v).tolist() for k, v in self.stats._asdict().items()}
+  def to_dict(self) -> dict:
+    """JSON-able record, stored with every checkpoint (``from_dict``)."""
+    return {**{k: np.asarray(v).tolist()
+               for k, v in self.stats._asdict().items()},
+            "bounds": np.asarray(self.bounds).tolist(), "radius": self.radius,
+            "noise_std": self.noise_std}
 
 
-def make_problem(config, stats: dict, bounds, radius: float) -> Problem:
-  """The problem of statistics ``stats`` (a checkpoint's), domain ``bounds``
-  [[x_min, x_max], [y_min, y_max]] (m) and the data's connectivity radius
-  (the model config's, if set, wins)."""
-  stats = features.Stats(*(np.asarray(stats[k], np.float32)
-                           for k in features.Stats._fields))
-  radius = float(config.model.connectivity_radius or radius)
+def _problem(config, stats: features.Stats, bounds, radius: float,
+             noise_std: float) -> Problem:
   bounds = np.asarray(bounds, np.float32)
   spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
                          config.train.capacity_multiplier)
-  return Problem(stats, bounds, radius, spec)
+  m = config.model
+  return Problem(stats, bounds, radius, spec, config.train.input_frames,
+                 config.train.frame_stride, m.boundary_particles,
+                 float(m.sdf_spacing or radius / 6), float(noise_std))
 
 
-def load_problem(data_dir: str, config, stats: dict | None = None) -> Problem:
-  """The dataset's problem; ``stats`` (a checkpoint's) replace the data's."""
+def problem_from_dict(config, stored: dict) -> Problem:
+  """The problem a checkpoint was trained on (``Problem.to_dict``)."""
+  stats = features.Stats(*(np.asarray(stored[k], np.float32)
+                           for k in features.Stats._fields))
+  return _problem(config, stats, stored["bounds"], float(stored["radius"]),
+                  float(stored["noise_std"]))
+
+
+def noise_std_of(train_config, stats: features.Stats) -> float:
+  """The training noise (m/step): ``noise_velocity_fraction`` times the RMS
+  velocity std of the data at the run's stride, or ``noise_std``."""
+  fraction = train_config.noise_velocity_fraction
+  if fraction:
+    return float(fraction * np.sqrt(np.mean(np.square(stats.vel_std))))
+  return float(train_config.noise_std)
+
+
+def load_problem(data_dir: str, config) -> Problem:
+  """The problem of a dataset: statistics at the config's frame stride (the
+  noise folded in if ``train.fold_noise``), domain and radius (the model
+  config's radius, if set, wins)."""
   train_path = data.split_path(data_dir, "train")
-  if stats is None:
-    stats = data.load_stats(train_path)._asdict()
+  stats = data.load_stats(train_path, config.train.frame_stride)
   header = mpm_io.read_header(train_path)
-  return make_problem(config, stats, header["bounds"],
-                      header["connectivity_radius"])
+  noise_std = noise_std_of(config.train, stats)
+  if config.train.fold_noise:
+    stats = features.fold_noise(stats, noise_std)
+  radius = float(config.model.connectivity_radius or
+                 header["connectivity_radius"])
+  return _problem(config, stats, header["bounds"], radius, noise_std)
 
 
 # The keys a training config must have (experiments/configs/paper.py).
 CONFIG_KEYS = {
     "model": ("latent_size", "hidden_layers", "num_message_passing_steps",
               "type_embedding_size", "split_first_layer",
-              "connectivity_radius"),
-    "train": ("seed", "batch_size", "num_steps", "input_frames", "noise_std",
-              "lr_init", "lr_min", "lr_decay_steps", "clip_norm",
-              "node_bucket", "capacity_multiplier"),
+              "connectivity_radius", "boundary_particles", "sdf_spacing"),
+    "train": ("seed", "batch_size", "num_steps", "input_frames",
+              "frame_stride", "noise_std", "noise_velocity_fraction",
+              "fold_noise", "motion_weighting", "pushforward_steps",
+              "pushforward_probability", "lr_init", "lr_min",
+              "lr_decay_steps", "clip_norm", "node_bucket",
+              "capacity_multiplier", "max_wall_time_s"),
     "checkpoint": ("every_steps", "named_steps", "keep"),
     "eval": ("every_steps", "num_windows", "rollout_steps", "num_rollouts"),
 }
@@ -153,6 +200,19 @@ def check_config(config) -> None:
   if config.train.input_frames < 2:
     raise ValueError(f"config.train.input_frames = "
                      f"{config.train.input_frames}; allowed: >= 2")
+  stride = config.train.frame_stride
+  if int(stride) != stride or stride < 1:
+    raise ValueError(f"config.train.frame_stride = {stride}; allowed: an "
+                     "integer >= 1")
+  if config.train.pushforward_steps < 0 or not (
+      0.0 <= config.train.pushforward_probability <= 1.0):
+    raise ValueError("config.train.pushforward_steps = "
+                     f"{config.train.pushforward_steps}, pushforward_"
+                     f"probability = {config.train.pushforward_probability}; "
+                     "allowed: steps >= 0, probability 0 to 1")
+  if not 0.0 <= config.train.motion_weighting <= 1.0:
+    raise ValueError(f"config.train.motion_weighting = "
+                     f"{config.train.motion_weighting}; allowed: 0 to 1")
 
 
 def _config_dict(config) -> dict:
@@ -162,12 +222,16 @@ def _config_dict(config) -> dict:
 # Dataset settings a model depends on (others, like trajectory counts, may
 # change between a run and its fine-tuning).
 _DATA_PHYSICS = ("spacing", "connectivity_radius")
+# Training settings the model's inputs depend on.
+_TRAIN_PHYSICS = ("input_frames", "frame_stride")
 
 
 def check_compatible(stored: dict, config) -> None:
   """Refuses to resume a run whose model or data physics differ."""
   current = _config_dict(config)
   pairs = [("model", stored.get("model"), current.get("model"))] + [
+      (f"train.{k}", stored.get("train", {}).get(k),
+       current.get("train", {}).get(k)) for k in _TRAIN_PHYSICS] + [
       (f"dataset.{k}", stored.get("dataset", {}).get(k),
        current.get("dataset", {}).get(k)) for k in _DATA_PHYSICS]
   for where, old, new in pairs:
@@ -198,7 +262,7 @@ class Trainer:
         self.mesh, jax.sharding.PartitionSpec())
     self._nbrs = {}  # padded node count -> batched neighbour list
     ctx, radius = problem.context, problem.radius
-    noise_std = config.train.noise_std
+    noise_std = problem.noise_std
 
     def prepare(key, positions, moving):
       keys = jax.random.split(key, positions.shape[0])
@@ -206,16 +270,15 @@ class Trainer:
                                         noise_std=noise_std))(
                                             keys, positions, moving)
 
-    def batch_loss(params, inputs, target, types, moving, senders, receivers):
+    def batch_loss(params, graphs: simulator.Graph, target):
       per_window = jax.vmap(
-          lambda i, t, ty, m, s, r: simulator.loss(
-              self.model, params, i, t, ty, m, s, r, ctx, radius))(
-                  inputs, target, types, moving, senders, receivers)
+          lambda g, t: simulator.loss(self.model, params, g, t, ctx, radius))(
+              graphs, target)
       return jnp.mean(per_window)
 
-    def train_step(state, inputs, target, types, moving, senders, receivers):
-      loss, grads = jax.value_and_grad(batch_loss)(
-          state.params, inputs, target, types, moving, senders, receivers)
+    def train_step(state, graphs, target):
+      loss, grads = jax.value_and_grad(batch_loss)(state.params, graphs,
+                                                   target)
       updates, opt_state = self.tx.update(grads, state.opt_state, state.params)
       params = optax.apply_updates(state.params, updates)
       return (state.replace(step=state.step + 1, params=params,
@@ -225,15 +288,17 @@ class Trainer:
     self.prepare = jax.jit(prepare)
     self.eval_loss = jax.jit(batch_loss)
     self.train_step = jax.jit(train_step, donate_argnums=0)
+    self._unroll = jax.jit(
+        functools.partial(rollout_lib.unroll,
+                          simulator.ModelPredictor(self.model)),
+        static_argnames=("spec", "length", "project", "batched"))
+    self._pushforward_nbrs = {}
 
   def init_state(self, seed: int) -> TrainState:
     init_key, key = jax.random.split(jax.random.key(seed))
-    n, e = 8, 8
-    params = self.model.init(
-        init_key,
-        jnp.zeros((n, 2 * (self.config.train.input_frames - 1) + 4)),
-        jnp.zeros((n,), jnp.int32), jnp.zeros((e, 3)),
-        jnp.zeros((e,), jnp.int32), jnp.zeros((e,), jnp.int32))
+    params = models.init_params(
+        self.model, init_key,
+        features.num_node_features(self.config.train.input_frames))
     state = TrainState(jnp.zeros((), jnp.int32), params,
                        self.tx.init(params), key)
     return jax.device_put(state, self.replicated)
@@ -249,17 +314,73 @@ class Trainer:
     self._nbrs[n] = nbrs
     return _batched_edges(nbrs, n)
 
+  def make_batch(self, windows) -> batching.Batch:
+    """The padded batch of some windows, with this run's node choice."""
+    return batching.make_batch(windows, self.problem.spec,
+                               self.config.train.node_bucket,
+                               self.problem.boundary_particles,
+                               self.problem.sdf_spacing)
+
   def batch_arrays(self, batch: batching.Batch, key: jax.Array,
-                   noise: bool = True):
+                   noise: bool = True, params=None,
+                   pushforward: int = 0) -> tuple[simulator.Graph, jax.Array]:
+    """(graphs with a leading batch axis, targets [B, N, 2]) on the devices.
+
+    The batch holds C + P + 1 frames per window (P = ``pushforward_steps``
+    of the config, 0 without). Without ``pushforward`` the last C + 1 frames
+    are the inputs and the target. With ``pushforward`` = P, the model
+    (``params``) first rolls the first C frames (noisy if ``noise``) P
+    steps on, without gradient and with the solid constraint, as in a
+    rollout; its own predictions are then the inputs, and the true frame P
+    steps later the target, so the model learns to correct the errors it
+    makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
+    """
     put = lambda a: jax.device_put(a, self.batch_sharding)
+    c = self.problem.input_frames
     positions, moving = put(batch.positions), put(batch.moving)
+    types = put(batch.particle_type)
+    solids = mpm_geometry.SDFGrid(put(batch.solids), self.problem.sdf_spacing)
+    extra = positions.shape[1] - c - 1
+    start = 0 if pushforward else extra
+    window = positions[:, start:start + c + 1]
     if noise:
-      inputs, target = self.prepare(key, positions, moving)
+      inputs, target = self.prepare(key, window, moving)
     else:
-      inputs, target = positions[:, :-1], positions[:, -1]
+      inputs, target = window[:, :-1], window[:, -1]
+    if pushforward:
+      inputs = self._push_forward(params, inputs, types, moving, solids,
+                                  pushforward)
+      target = positions[:, c + pushforward]
     senders, receivers = self.graph_edges(inputs[:, -1])
-    return (inputs, target, put(batch.particle_type), moving,
-            put(senders), put(receivers))
+    graphs = simulator.Graph(inputs, types, moving, put(senders),
+                             put(receivers), solids)
+    return graphs, target
+
+  def _push_forward(self, params, inputs, types, moving, solids, steps):
+    """Inputs [B, C, N, 2] after ``steps`` learned steps from ``inputs``."""
+    spec = self.problem.spec
+    window = jnp.swapaxes(inputs, 0, 1)                   # [C, B, N, 2]
+    n = inputs.shape[2]
+    nbrs = self._pushforward_nbrs.get(n)
+    if nbrs is None:
+      nbrs = graph.allocate_batch(spec, window[-1])
+    for _ in range(3):
+      positions, carried, overflow, nbrs, _ = self._unroll(
+          params, window, types, moving, solids, nbrs, self.problem.context,
+          spec=spec, length=steps, project=True, batched=True)
+      if not bool(jnp.any(overflow)):
+        break
+      # Grow the list (never shrinking it) until it holds every step's
+      # edges; the steps after an overflow are only approximately right,
+      # hence the retry.
+      for frame in [window[-1]] + list(positions):
+        nbrs, _ = graph.update_or_reallocate(spec, frame, nbrs, batched=True)
+    else:
+      raise RuntimeError("pushforward: neighbour list overflowed after 3 "
+                         "reallocations")
+    self._pushforward_nbrs[n] = nbrs
+    frames = jnp.concatenate([window[:-1], carried, positions[-1:]], 0)
+    return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
 
 
 @functools.partial(jax.jit, static_argnums=1)
@@ -275,21 +396,20 @@ def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
              num_windows: int, rollout_steps: int, num_rollouts: int) -> dict:
   """One-step loss on test windows (no noise), and rollout position MSE
   against ground truth and a constant-velocity baseline."""
-  cfg = trainer.config
+  cfg, problem = trainer.config, trainer.problem
   test_path = data.split_path(data_dir, "test")
   metrics = {}
-  with data.WindowDataset(test_path, input_frames=cfg.train.input_frames,
-                          seed=0) as ds:
+  with data.WindowDataset(test_path, input_frames=problem.input_frames,
+                          frame_stride=problem.frame_stride, seed=0) as ds:
     windows = [ds[k] for k in range(min(num_windows, len(ds)))]
   losses = []
   for i in range(0, len(windows), cfg.train.batch_size):
     chunk = windows[i:i + cfg.train.batch_size]
     if len(chunk) < cfg.train.batch_size:
       break
-    batch = batching.make_batch(chunk, trainer.problem.spec,
-                                cfg.train.node_bucket)
-    arrays = trainer.batch_arrays(batch, None, noise=False)
-    losses.append(float(trainer.eval_loss(state.params, *arrays)))
+    graphs, target = trainer.batch_arrays(trainer.make_batch(chunk), None,
+                                          noise=False)
+    losses.append(float(trainer.eval_loss(state.params, graphs, target)))
   if losses:
     metrics["eval/one_step_loss"] = float(np.mean(losses))
   if rollout_steps > 0 and num_rollouts > 0:
@@ -297,15 +417,16 @@ def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
     for k, t in enumerate(data.trajectories(test_path)):
       if k >= num_rollouts:
         break
-      c = cfg.train.input_frames
-      steps = min(rollout_steps, len(t.positions) - c)
+      frames = rollout_lib.predicted_frame_indices(
+          len(t.positions), problem.input_frames, problem.frame_stride)
+      frames = frames[:rollout_steps]
       pred = rollout_lib.rollout_trajectory(
-          trainer.model, state.params, t, trainer.problem, steps, c)
-      truth = t.positions[c:c + steps]
+          trainer.model, state.params, t, problem, len(frames)).positions
+      truth = t.positions[frames]
       errors.append(np.mean(np.sum((pred - truth)**2, -1)))
-      v = t.positions[c - 1] - t.positions[c - 2]
-      const = t.positions[c - 1][None] + v[None] * np.arange(
-          1, steps + 1)[:, None, None]
+      const = metrics_lib.constant_velocity(t.positions, frames,
+                                            problem.input_frames,
+                                            problem.frame_stride)
       baseline.append(np.mean(np.sum((const - truth)**2, -1)))
     metrics["eval/rollout_mse"] = float(np.mean(errors))
     metrics["eval/rollout_mse_constant_velocity"] = float(np.mean(baseline))
@@ -344,23 +465,28 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
                             cfg.checkpoint.named_steps, cfg.checkpoint.keep)
   config_dict = _config_dict(config)
-  stored_stats = None
+  stored = None
   if mngr.latest_step() is not None:
     check_compatible(checkpoint.read_config(mngr, mngr.latest_step()), config)
-    stored_stats = checkpoint.read_stats(mngr, mngr.latest_step())
+    stored = checkpoint.read_stats(mngr, mngr.latest_step())
   # A resumed (or fine-tuned) model keeps the statistics it was trained with.
-  problem = load_problem(data_dir, config, stored_stats)
+  problem = (problem_from_dict(config, stored) if stored is not None else
+             load_problem(data_dir, config))
   trainer = Trainer(config, problem)
   state = trainer.init_state(tcfg.seed)
-  if stored_stats is not None:
+  if stored is not None:
     state, _, _ = checkpoint.restore(mngr, state)
     state = jax.device_put(state, trainer.replicated)
     logging.info("resumed from step %d", int(state.step))
   mpm_io.write_json(os.path.join(workdir, "config.json"), config_dict)
-  mpm_io.write_json(os.path.join(workdir, "stats.json"), problem.stats_dict())
+  mpm_io.write_json(os.path.join(workdir, "stats.json"), problem.to_dict())
 
+  pushforward = tcfg.pushforward_steps
   dataset = data.WindowDataset(data.split_path(data_dir, "train"),
-                               input_frames=tcfg.input_frames, seed=tcfg.seed)
+                               input_frames=tcfg.input_frames + pushforward,
+                               seed=tcfg.seed,
+                               frame_stride=tcfg.frame_stride,
+                               motion_weighting=tcfg.motion_weighting)
   writer = tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
   csv_path = os.path.join(workdir, "metrics.csv")
   schedule = learning_rate_schedule(tcfg.lr_init, tcfg.lr_min,
@@ -377,11 +503,15 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
     if csv_file.tell() == 0:
       out.writeheader()
     for step in range(start, tcfg.num_steps):
-      batch = batching.make_batch(_windows(dataset, step, tcfg.batch_size),
-                                  problem.spec, tcfg.node_bucket)
-      arrays = trainer.batch_arrays(batch,
-                                    jax.random.fold_in(state.key, step))
-      state, step_metrics = trainer.train_step(state, *arrays)
+      batch = trainer.make_batch(_windows(dataset, step, tcfg.batch_size))
+      # A pure function of (seed, step), so a resumed run pushes forward at
+      # the same steps.
+      push = pushforward if pushforward and np.random.default_rng(
+          [tcfg.seed, step, 1]).random() < tcfg.pushforward_probability else 0
+      graphs, target = trainer.batch_arrays(
+          batch, jax.random.fold_in(state.key, step), params=state.params,
+          pushforward=push)
+      state, step_metrics = trainer.train_step(state, graphs, target)
       done = step + 1
       if done % cfg.log_every == 0 or done == tcfg.num_steps:
         now = time.perf_counter()
@@ -405,9 +535,53 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
           writer.add_scalar(k, v, done)
         logging.info("step %d: %s", done, eval_metrics)
         metrics.update(eval_metrics)
-      checkpoint.save(mngr, done, state, config_dict, problem.stats_dict(),
-                      force=done == tcfg.num_steps)
+      out_of_time = (tcfg.max_wall_time_s and time.perf_counter() - run_start
+                     + trained_before >= tcfg.max_wall_time_s)
+      checkpoint.save(mngr, done, state, config_dict, problem.to_dict(),
+                      force=done == tcfg.num_steps or bool(out_of_time))
+      if out_of_time:
+        logging.info("stopping at step %d: max_wall_time_s = %s reached",
+                     done, tcfg.max_wall_time_s)
+        break
   writer.close()
   dataset.close()
   mngr.close()
   return metrics
+
+
+class Run(NamedTuple):
+  """A trained model, ready for inference (no optimiser).
+
+  Attributes:
+    model: the network; params: its parameters.
+    problem: statistics, graph and feature settings it was trained with.
+    step: the checkpoint's training step; config: the run's config.
+  """
+  model: models.EncodeProcessDecode
+  params: Any
+  problem: Problem
+  step: int
+  config: ml_collections.ConfigDict
+
+
+def load_run(workdir: str, step: int | None = None) -> Run:
+  """A run's checkpoint (default: the latest), restored on its own.
+
+  Every checkpoint stores its config and its problem (statistics, domain,
+  radius), so a work directory, or a shipped model such as
+  ``experiments/pretrained/small``, needs no dataset to restore.
+  """
+  mngr = checkpoint.manager(workdir, every_steps=1)
+  step = mngr.latest_step() if step is None else step
+  if step is None:
+    mngr.close()
+    raise FileNotFoundError(f"{workdir}: no checkpoint to restore")
+  config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
+  problem = problem_from_dict(config, checkpoint.read_stats(mngr, step))
+  model = create_model(config.model)
+  abstract = models.init_params(
+      model, jax.random.key(0),
+      features.num_node_features(config.train.input_frames))
+  params = checkpoint.restore_params(mngr, abstract, step)
+  mngr.close()
+  return Run(model, params, problem, int(step), config)

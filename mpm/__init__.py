@@ -13,9 +13,13 @@ Pure building blocks (``mpm.solver.rollout``, ``mpm.setup``) are for batching,
 from mpm.geometry import KINEMATIC_TYPES
 from mpm.geometry import OBSTACLE_TYPE
 from mpm.geometry import RAMP_TYPE
+from mpm.geometry import SDFGrid
 from mpm.geometry import SAND_TYPE
 from mpm.geometry import boundary_particles
 from mpm.geometry import granular_particles
+from mpm.geometry import push_out
+from mpm.geometry import sample_sdf
+from mpm.geometry import scene_sdf_grid
 from mpm.sampler import sample_scene
 from mpm.scene import Scene
 from mpm.simulation import SimulationError
@@ -31,7 +35,7 @@ from mpm.solver import rollout
 
 __all__ = [
     "KINEMATIC_TYPES", "OBSTACLE_TYPE", "RAMP_TYPE", "SAND_TYPE",
-    "MPMState", "Scene", "Setup", "SimParams", "SimulationError",
-    "SimulationResult", "boundary_particles", "granular_particles", "rollout",
-    "sample_scene", "setup", "simulate", "simulate_batch", "simulate_setups",
+    "MPMState", "SDFGrid", "Scene", "Setup", "SimParams", "SimulationError",
+    "SimulationResult", "boundary_particles", "granular_particles", "push_out", "rollout",
+    "sample_scene", "sample_sdf", "scene_sdf_grid", "setup", "simulate", "simulate_batch", "simulate_setups",
 ]

@@ -184,5 +184,5 @@ def project_particles(field: BoundaryField, st: transfer.Stencil,
   phi_new = phi + jnp.sum(grad * (x_new - x_old), -1)
   g_sq = jnp.sum(grad * grad, -1)
   inv = jax.lax.rsqrt(jnp.where(g_sq > 0, g_sq, 1.0)) * (g_sq > 0)
-  push = jnp.maximum(-phi_new, 0.0) * inv
-  return x_new + push[:, None] * grad * inv[:, None]
+  # phi_new is first-order accurate, so the push divides by |grad| once more.
+  return geometry.push_out(x_new, phi_new * inv, grad * inv[:, None])

@@ -176,6 +176,107 @@ def solid_sdf(ramp: RampParams, obstacles: tuple[ObstacleParams, ...],
   return phi
 
 
+def domain_sdf(width: float, height: float, p: jax.Array) -> jax.Array:
+  """Signed distance [m] to the domain's box walls (negative outside the
+  box [0, width] x [0, height]) for points ``p`` [..., 2]."""
+  x, y = p[..., 0], p[..., 1]
+  return jnp.minimum(jnp.minimum(x, width - x), jnp.minimum(y, height - y))
+
+
+def scene_sdf(ramp: RampParams, obstacles: tuple[ObstacleParams, ...],
+              width: float, height: float, p: jax.Array) -> jax.Array:
+  """Signed distance [m] to everything sand must stay out of: ramp,
+  obstacles and the outside of the domain, for points ``p`` [..., 2]."""
+  return jnp.minimum(solid_sdf(ramp, obstacles, p),
+                     domain_sdf(width, height, p))
+
+
+@_pytree.pytree_dataclass
+class SDFGrid:
+  """A scene's signed distance and outward normal sampled on a grid.
+
+  Node (i, j) sits at (i * spacing, j * spacing), covering the domain
+  [0, width] x [0, height]; values between nodes are bilinear. One shape per
+  domain and spacing, whatever the obstacles, so scenes batch and one
+  compiled program serves them all.
+
+  Attributes:
+    values: [Gx, Gy, 3] (phi (m), n_x, n_y) at the nodes; phi is
+      ``scene_sdf``, n its unit gradient (outward from the solids).
+    spacing: node spacing (m) (static).
+  """
+  values: jax.Array
+  spacing: float = _pytree.static_field(default=0.005)
+
+
+def grid_shape(width: float, height: float, spacing: float) -> tuple[int, int]:
+  """(Gx, Gy) nodes of an ``SDFGrid`` covering the domain."""
+  return (int(math.ceil(width / spacing - 1e-9)) + 1,
+          int(math.ceil(height / spacing - 1e-9)) + 1)
+
+
+def sdf_grid(ramp: RampParams, obstacles: tuple[ObstacleParams, ...],
+             width: float, height: float, spacing: float) -> SDFGrid:
+  """The ``SDFGrid`` of a scene (jittable with width, height and spacing
+  static; differentiable in the obstacles' placement and size)."""
+  gx, gy = grid_shape(width, height, spacing)
+  nodes = jnp.stack(jnp.meshgrid(jnp.arange(gx) * spacing,
+                                 jnp.arange(gy) * spacing, indexing="ij"), -1)
+  sdf = lambda q: scene_sdf(ramp, obstacles, width, height, q)
+  phi, grad = jax.vmap(jax.value_and_grad(sdf))(nodes.reshape(-1, 2))
+  normal = grad * jax.lax.rsqrt(jnp.maximum(jnp.sum(grad**2, -1),
+                                            1e-12))[:, None]
+  values = jnp.concatenate([phi[:, None], normal], -1).reshape(gx, gy, 3)
+  return SDFGrid(values, float(spacing))
+
+
+def sample_sdf(grid: SDFGrid, p: jax.Array) -> tuple[jax.Array, jax.Array]:
+  """Bilinear signed distance [...] (m) and unit outward normal [..., 2] at
+  points ``p`` [..., 2]; points off the grid take its nearest edge's values.
+  Differentiable in ``p`` and in the grid's values."""
+  gx, gy = grid.values.shape[:2]
+  q = p / grid.spacing
+  lo = jnp.floor(q)
+  t = q - lo
+  i = jnp.clip(lo[..., 0].astype(jnp.int32), 0, gx - 2)
+  j = jnp.clip(lo[..., 1].astype(jnp.int32), 0, gy - 2)
+  tx = jnp.clip(t[..., 0] + (lo[..., 0] - i), 0.0, 1.0)[..., None]
+  ty = jnp.clip(t[..., 1] + (lo[..., 1] - j), 0.0, 1.0)[..., None]
+  v = grid.values
+  value = ((1 - tx) * (1 - ty) * v[i, j] + tx * (1 - ty) * v[i + 1, j] +
+           (1 - tx) * ty * v[i, j + 1] + tx * ty * v[i + 1, j + 1])
+  n = value[..., 1:]
+  n = n * jax.lax.rsqrt(jnp.maximum(jnp.sum(n * n, -1, keepdims=True), 1e-12))
+  return value[..., 0], n
+
+
+def push_out(x: jax.Array, phi: jax.Array, normal: jax.Array) -> jax.Array:
+  """Moves points with phi < 0 back to the surface along ``normal``.
+
+  Shared by the MPM's particle projection and the learned simulator's
+  constraint. Differentiable (the push is max(-phi, 0), linear inside).
+
+  Args:
+    x: [N, 2] positions (m); phi: [N] signed distances there (m);
+    normal: [N, 2] unit outward normals (zero where unknown: no push).
+  """
+  return x + jnp.maximum(-phi, 0.0)[:, None] * normal
+
+
+_sdf_grid = jax.jit(sdf_grid, static_argnums=(2, 3, 4))
+
+
+def scene_sdf_grid(scene: scene_lib.Scene, spacing: float) -> SDFGrid:
+  """The ``SDFGrid`` of a scene at node ``spacing`` (m). Host-side: one
+  compiled program per combination of obstacle shapes."""
+  if not spacing > 0:
+    raise ValueError(f"SDF grid spacing = {spacing}; allowed: > 0 (m)")
+  return _sdf_grid(ramp_params(scene.ramp),
+                   tuple(obstacle_params(o) for o in scene.obstacles),
+                   float(scene.domain.width), float(scene.domain.height),
+                   float(spacing))
+
+
 # ------------------------------------------------------ boundary particles ---
 
 

@@ -72,11 +72,16 @@ class Trajectory:
                result.boundary_types, result.scene, seed, result.wall_time_s)
 
 
-def finite_difference_stats(positions: Sequence[np.ndarray]) -> dict:
-  """Mean and std [2] of per-frame velocities and accelerations.
+def finite_difference_stats(positions: Sequence[np.ndarray],
+                            stride: int = 1) -> dict:
+  """Mean and std [2] of velocities and accelerations per ``stride`` frames.
+
+  Velocities x[f + k] - x[f] and accelerations x[f + 2k] - 2 x[f + k] + x[f]
+  at every frame f, for k = ``stride``.
 
   Args:
-    positions: trajectories, each [T, N, 2] with T >= 3.
+    positions: trajectories, each [T, N, 2] with T >= 2 stride + 1.
+    stride: k >= 1.
 
   Returns:
     dict with vel_mean, vel_std, acc_mean, acc_std (float64 [2]).
@@ -86,11 +91,12 @@ def finite_difference_stats(positions: Sequence[np.ndarray]) -> dict:
   counts = {"v": 0, "a": 0}
   for x in positions:
     x = np.asarray(x, np.float64)
-    if x.shape[0] < 3:
-      raise ValueError(f"positions: need at least 3 frames for accelerations, "
-                       f"got shape {x.shape}")
-    v = np.diff(x, axis=0).reshape(-1, 2)
-    a = np.diff(x, n=2, axis=0).reshape(-1, 2)
+    k = stride
+    if x.shape[0] < 2 * k + 1:
+      raise ValueError(f"positions: need at least {2 * k + 1} frames for "
+                       f"accelerations at stride {k}, got shape {x.shape}")
+    v = (x[k:] - x[:-k]).reshape(-1, 2)
+    a = (x[2 * k:] - 2 * x[k:-k] + x[:-2 * k]).reshape(-1, 2)
     sums["v"] += v.sum(0)
     sums["v2"] += (v * v).sum(0)
     sums["a"] += a.sum(0)
@@ -155,12 +161,17 @@ def write_split(path: str, trajectories: Iterable[Trajectory], *, stats: dict,
   return wall_times
 
 
-def write_json(path: str, obj) -> None:
-  """Writes ``obj`` as JSON atomically."""
+def write_text(path: str, text: str) -> None:
+  """Writes ``text`` to ``path`` atomically (a temporary file, renamed)."""
   tmp = f"{path}.tmp-{os.getpid()}"
   with open(tmp, "w") as f:
-    json.dump(obj, f, indent=2)
+    f.write(text)
   os.replace(tmp, path)
+
+
+def write_json(path: str, obj) -> None:
+  """Writes ``obj`` as JSON atomically."""
+  write_text(path, json.dumps(obj, indent=2))
 
 
 def write_header(f: h5py.File, scene: scene_lib.Scene, sequence_length: int,

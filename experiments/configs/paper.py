@@ -26,6 +26,13 @@ def get_config() -> ml_collections.ConfigDict:
   # None: the dataset's connectivity radius.
   config.model.connectivity_radius = ml_collections.FieldReference(
       None, field_type=float)
+  # Static boundary particles (ramp and obstacle outlines) as graph nodes.
+  # The solids are always seen through the scene's signed distance field
+  # (node features); boundary particles add a second, costlier view.
+  config.model.boundary_particles = True
+  # Node spacing of the SDF grid (m); None: R / 6.
+  config.model.sdf_spacing = ml_collections.FieldReference(
+      None, field_type=float)
 
   # Training.
   config.train = ml_collections.ConfigDict()
@@ -33,7 +40,21 @@ def get_config() -> ml_collections.ConfigDict:
   config.train.batch_size = 2
   config.train.num_steps = 2_000_000
   config.train.input_frames = 6
-  config.train.noise_std = 3e-4           # m/frame, velocity random walk
+  config.train.frame_stride = 1           # stored frames per learned step
+  config.train.noise_std = 3e-4           # m/step, velocity random walk
+  # If > 0: noise = this fraction of the data's velocity std at the stride
+  # (replaces noise_std).
+  config.train.noise_velocity_fraction = 0.0
+  # Divide by sqrt(std^2 + noise^2) (DeepMind's, geoelements', LagrangeBench).
+  config.train.fold_noise = False
+  # 0: windows uniformly; p > 0: weight (1 - p) + p * speed / mean speed.
+  config.train.motion_weighting = 0.0
+  # Pushforward: with this probability per batch, the model first rolls its
+  # inputs this many steps on (no gradient) and learns from its own output.
+  config.train.pushforward_steps = 0
+  config.train.pushforward_probability = 0.0
+  # Stop (with a checkpoint) after this much training time (s); 0: never.
+  config.train.max_wall_time_s = 0.0
   config.train.lr_init = 1e-4
   config.train.lr_min = 1e-6
   config.train.lr_decay_steps = 5_000_000

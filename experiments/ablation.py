@@ -1,0 +1,38 @@
+"""The training recipe's ablation: each part added in turn, equal training
+time, whole test rollouts scored (``experiments.tasks.ablation``).
+
+  python -m experiments.ablation --data=data/small --out=runs/ablation \
+      [--minutes=8] [--variants=previous,stride3,...]
+"""
+
+from absl import app
+from absl import flags
+
+from experiments import runtime
+from experiments import tasks
+
+_DATA = flags.DEFINE_string("data", None, "Dataset directory (small config).")
+_OUT = flags.DEFINE_string("out", None, "Output directory (one run each).")
+_MINUTES = flags.DEFINE_float("minutes", 8.0,
+                              "Training wall time per variant (minutes).")
+_VARIANTS = flags.DEFINE_list(
+    "variants", None, "Variants to run (default: all): "
+    + ", ".join(name for name, _ in tasks.ABLATION))
+_MAX = flags.DEFINE_integer("max_trajectories", 7,
+                            "Test trajectories per variant (7: one per group).")
+
+
+def main(argv):
+  del argv
+  if _MINUTES.value <= 0:
+    raise app.UsageError(f"--minutes={_MINUTES.value}; allowed: > 0")
+  runtime.enable_compilation_cache()
+  rows = tasks.ablation(_DATA.value, _OUT.value, minutes=_MINUTES.value,
+                        variants=_VARIANTS.value,
+                        max_trajectories=_MAX.value)
+  print(tasks.ablation_table(rows))
+
+
+if __name__ == "__main__":
+  flags.mark_flags_as_required(["data", "out"])
+  app.run(main)

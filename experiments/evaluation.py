@@ -1,0 +1,408 @@
+"""The paper's evaluation of a trained run on a dataset (section III).
+
+``evaluate(workdir, data_dir, out_dir)`` writes PNG figures (through
+``experiments.figures``), every number as CSV/JSON, and a Markdown report:
+
+- Fig. 3: training loss against steps; Fig. 4: training time against steps
+  (from ``metrics.csv``);
+- Fig. 5: test error (positional MSE over all test trajectories, particles and
+  steps) of the named checkpoints (the paper's V1-V4) and the latest;
+- Figs. 6-9: positional MSE against time by obstacle count, particle count,
+  obstacle shape (the triangle was never seen in training) and rectangle
+  position;
+- what a positional MSE does not catch, per step and per test group: the
+  fraction of the sand inside solids (deeper than half a particle spacing)
+  and outside the domain, with and without the solid constraint, how often
+  and how deep the constraint acted, the front (runout) error and the
+  deposit-profile error, against the MPM and a constant-velocity baseline;
+- Table 2: MPM and GNS wall time per simulation, side by side in this run on
+  this hardware (compilation excluded, synchronised, medians of repeats), each
+  beside its accuracy.
+
+Rollouts start from the MPM's frames 0, k, ..., (C - 1) k (k the run's frame
+stride) and are compared with the MPM at the stored frames they predict.
+"""
+
+import csv
+import os
+import time
+from typing import Any, Sequence
+
+import jax
+import numpy as np
+
+import mpm
+from experiments import figures
+from gnsjax import data
+from gnsjax import metrics
+from gnsjax import rollout as rollout_lib
+from gnsjax import train
+from mpm import dataset as dataset_lib
+from mpm import io as mpm_io
+
+
+def checkpoint_steps(workdir: str) -> list[int]:
+  path = os.path.join(workdir, "checkpoints")
+  if not os.path.isdir(path):
+    return []
+  return sorted(int(d) for d in os.listdir(path) if d.isdigit())
+
+
+def describe(scene: mpm.Scene) -> dict:
+  """The breakdown labels of a test scene."""
+  shapes = [o.shape for o in scene.obstacles]
+  return {
+      "group": dataset_lib.group_of(scene.name),
+      "obstacles": len(shapes),
+      "particles": scene.granular.num_particles,
+      "shape": shapes[0] if len(shapes) == 1 else "",
+      "x": scene.obstacles[0].x if len(shapes) == 1 else None,
+  }
+
+
+def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
+          frames: np.ndarray, problem: train.Problem) -> dict:
+  """Every metric of one rollout against its MPM trajectory.
+
+  Args:
+    t: the MPM trajectory [F, N, 2].
+    out: the rollout; its step i is stored frame ``frames[i]``.
+    problem: the run's problem (input frames and stride for the baseline).
+  """
+  pred, truth = out.positions, t.positions[frames]
+  scene = t.scene
+  n = pred.shape[1]
+  constant = metrics.constant_velocity(t.positions, frames,
+                                       problem.input_frames,
+                                       problem.frame_stride)
+  return {
+      "frames": frames, "predicted": pred, "truth": truth,
+      "mse": metrics.positional_mse(pred, truth),
+      "mse_constant_velocity": metrics.positional_mse(constant, truth),
+      "runout_error": metrics.runout_error(pred, truth),
+      "front_error_relative": metrics.front_error_relative(
+          pred[-1], truth[-1], t.positions[0]),
+      "deposit_error": metrics.deposit_error(pred[-1], truth[-1],
+                                             2 * scene.granular.spacing),
+      "inside_solids": metrics.inside_solids(pred, scene),
+      "outside_domain": metrics.outside_domain(pred, scene),
+      "mpm_inside_solids": metrics.inside_solids(truth, scene),
+      "pushed_fraction": out.pushed / n,
+      "pushed_depth": out.depth,
+  }
+
+
+def rollout_split(run: train.Run, path: str,
+                  max_trajectories: int | None = None,
+                  unconstrained: bool = True) -> list[dict]:
+  """Rolls out every trajectory of a split from its first frames.
+
+  Returns one dict per trajectory: its labels (``describe``), ``score``'s
+  metrics of the constrained rollout, and, if ``unconstrained``, the
+  fraction of sand inside solids and outside the domain of a rollout
+  without the solid constraint (``free_inside_solids``,
+  ``free_outside_domain``, ``free_mse``).
+  """
+  results = []
+  problem = run.problem
+  for i, t in enumerate(data.trajectories(path)):
+    if max_trajectories is not None and i >= max_trajectories:
+      break
+    frames = rollout_lib.predicted_frame_indices(
+        len(t.positions), problem.input_frames, problem.frame_stride)
+    out = rollout_lib.rollout_trajectory(run.model, run.params, t, problem)
+    r = {"index": i, "name": t.scene.name, **describe(t.scene),
+         "trajectory": t, **score(t, out, frames, problem)}
+    if unconstrained:
+      free = rollout_lib.rollout_trajectory(run.model, run.params, t, problem,
+                                            project=False).positions
+      r["free_inside_solids"] = metrics.inside_solids(free, t.scene)
+      r["free_outside_domain"] = metrics.outside_domain(free, t.scene)
+      r["free_mse"] = metrics.positional_mse(free, r["truth"])
+    results.append(r)
+  return results
+
+
+BREAKDOWNS = {
+    "fig6_obstacles": ("obstacles", lambda r: True),
+    "fig7_particles": ("particles", lambda r: True),
+    "fig8_shape": ("shape", lambda r: r["obstacles"] == 1),
+    "fig9_position": ("x", lambda r: r["obstacles"] == 1 and
+                      r["group"].startswith("rectangle")),
+}
+
+
+def breakdown(results: Sequence[dict],
+              key_metric: str = "mse") -> dict[str, dict[str, np.ndarray]]:
+  """Mean curve [T] of a metric per label, for each of the paper's Figs.
+  6-9."""
+  out = {}
+  for fig, (key, keep) in BREAKDOWNS.items():
+    groups: dict[str, list] = {}
+    for r in results:
+      if keep(r):
+        groups.setdefault(str(r[key]), []).append(r[key_metric])
+    out[fig] = {label: np.mean(np.stack(curves), 0)
+                for label, curves in sorted(groups.items())}
+  return out
+
+
+def per_trajectory_row(r: dict) -> dict:
+  """The CSV row of one rollout: whole-rollout and final-step figures."""
+  row = {
+      "index": r["index"], "name": r["name"], "group": r["group"],
+      "obstacles": r["obstacles"], "particles": r["particles"],
+      "mean_mse": float(np.mean(r["mse"])),
+      "mean_mse_constant_velocity": float(np.mean(r["mse_constant_velocity"])),
+      "final_mse": float(r["mse"][-1]),
+      "final_runout_error": float(r["runout_error"][-1]),
+      "front_error_relative": float(r["front_error_relative"]),
+      "deposit_error": r["deposit_error"],
+      "max_inside_solids": float(np.max(r["inside_solids"])),
+      "max_outside_domain": float(np.max(r["outside_domain"])),
+      "mpm_max_inside_solids": float(np.max(r["mpm_inside_solids"])),
+      "mean_pushed_fraction": float(np.mean(r["pushed_fraction"])),
+      "max_pushed_depth": float(np.max(r["pushed_depth"])),
+  }
+  if "free_inside_solids" in r:
+    row.update(
+        free_mean_mse=float(np.mean(r["free_mse"])),
+        free_final_inside_solids=float(r["free_inside_solids"][-1]),
+        free_max_inside_solids=float(np.max(r["free_inside_solids"])),
+        free_max_outside_domain=float(np.max(r["free_outside_domain"])))
+  return row
+
+
+def group_summary(rows: Sequence[dict]) -> list[dict]:
+  """Per test group (and all): medians and maxima of the per-trajectory
+  rows."""
+  groups: dict[str, list] = {"all": list(rows)}
+  for row in rows:
+    groups.setdefault(row["group"], []).append(row)
+  out = []
+  for name, members in groups.items():
+    col = lambda k: np.array([m[k] for m in members if k in m], float)
+    entry = {
+        "group": name, "trajectories": len(members),
+        "mean_mse": float(np.mean(col("mean_mse"))),
+        "mean_mse_constant_velocity": float(np.mean(
+            col("mean_mse_constant_velocity"))),
+        "median_front_error_relative": float(np.median(
+            col("front_error_relative"))),
+        "median_deposit_error": float(np.median(col("deposit_error"))),
+        "max_inside_solids": float(np.max(col("max_inside_solids"))),
+        "max_outside_domain": float(np.max(col("max_outside_domain"))),
+        "mean_pushed_fraction": float(np.mean(col("mean_pushed_fraction"))),
+        "max_pushed_depth": float(np.max(col("max_pushed_depth"))),
+    }
+    if len(col("free_max_inside_solids")):
+      entry["free_max_inside_solids"] = float(np.max(
+          col("free_max_inside_solids")))
+      entry["free_median_final_inside_solids"] = float(np.median(
+          col("free_final_inside_solids")))
+      entry["free_mean_mse"] = float(np.mean(col("free_mean_mse")))
+    out.append(entry)
+  return out
+
+
+def _median_time(fn, repeats: int) -> float:
+  times = []
+  for _ in range(repeats):
+    start = time.perf_counter()
+    fn()
+    times.append(time.perf_counter() - start)
+  return float(np.median(times))
+
+
+def table2(run: train.Run, results: Sequence[dict],
+           repeats: int = 3) -> list[dict]:
+  """MPM vs GNS seconds per simulation, one scene per test group.
+
+  The MPM time is ``mpm.simulate``'s simulation time (compilation excluded,
+  each chunk synchronised); the GNS time is a whole rollout after a warm-up
+  rollout (compilation excluded), synchronised by fetching the result.
+  """
+  rows = []
+  seen = set()
+  for r in results:
+    if r["group"] in seen:
+      continue
+    seen.add(r["group"])
+    t = r["trajectory"]
+    mpm.simulate(t.scene)  # compile
+    mpm_s = float(np.median([mpm.simulate(t.scene).wall_time_s
+                             for _ in range(repeats)]))
+    run_once = lambda: rollout_lib.rollout_trajectory(run.model, run.params,
+                                                      t, run.problem)
+    run_once()  # compile
+    gns = _median_time(run_once, repeats)
+    rows.append({
+        "group": r["group"], "particles": r["particles"],
+        "obstacles": r["obstacles"], "frames": len(t.positions),
+        "gns_steps": len(r["frames"]), "mpm_s": mpm_s, "gns_s": gns,
+        "speedup": mpm_s / gns, "gns_mse": float(np.mean(r["mse"])),
+    })
+  return rows
+
+
+def read_csv(path: str) -> list[dict]:
+  if not os.path.exists(path):
+    return []
+  with open(path, newline="") as f:
+    return list(csv.DictReader(f))
+
+
+def write_csv(path: str, rows: Sequence[dict]):
+  """Rows (dicts with the first row's keys) as CSV, atomically."""
+  if not rows:
+    return
+  tmp = f"{path}.tmp-{os.getpid()}"
+  with open(tmp, "w", newline="") as f:
+    writer = csv.DictWriter(f, fieldnames=list(rows[0]),
+                            extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+  os.replace(tmp, path)
+
+
+def evaluate(workdir: str, data_dir: str, out_dir: str, *,
+             max_trajectories: int | None = None, timing_repeats: int = 3,
+             checkpoint_errors: bool = True,
+             checkpoint_trajectories: int | None = None,
+             unconstrained: bool = True) -> dict[str, Any]:
+  """Writes the paper's figures, numbers and a report for a trained run.
+
+  Args:
+    max_trajectories: evaluate the first test trajectories only.
+    timing_repeats: repeats of each Table 2 timing (median reported).
+    checkpoint_errors: also roll out the named checkpoints (Fig. 5).
+    checkpoint_trajectories: test trajectories for Fig. 5 (default: as
+      many as the rest of the evaluation).
+    unconstrained: also roll out without the solid constraint, to report
+      how much sand the model alone would put inside solids.
+  """
+  test_path = data.split_path(data_dir, "test")
+  run = train.load_run(workdir)
+  os.makedirs(out_dir, exist_ok=True)
+  summary: dict[str, Any] = {
+      "workdir": workdir, "data": data_dir, "step": run.step,
+      "device": str(jax.devices()[0]),
+      "frame_stride": run.problem.frame_stride,
+      "input_frames": run.problem.input_frames,
+      "boundary_particles": run.problem.boundary_particles}
+
+  log = read_csv(os.path.join(workdir, "metrics.csv"))
+  if log:
+    figures.training_curves(log, out_dir)
+
+  results = rollout_split(run, test_path, max_trajectories, unconstrained)
+  frame_dt = results[0]["trajectory"].scene.frame_dt
+  curves = breakdown(results)
+  figures.breakdown_curves(curves, results[0]["frames"] * frame_dt, out_dir)
+  figures.flow_checks(results, frame_dt, os.path.join(out_dir,
+                                                      "flow_checks.png"))
+  rows = [per_trajectory_row(r) for r in results]
+  write_csv(os.path.join(out_dir, "trajectories.csv"), rows)
+  groups = group_summary(rows)
+  write_csv(os.path.join(out_dir, "groups.csv"), groups)
+  summary["test_mse"] = float(np.mean([np.mean(r["mse"]) for r in results]))
+  summary["test_mse_constant_velocity"] = float(np.mean(
+      [np.mean(r["mse_constant_velocity"]) for r in results]))
+  summary["groups"] = groups
+  summary["curves"] = {fig: {k: v.tolist() for k, v in g.items()}
+                       for fig, g in curves.items()}
+
+  errors = {}
+  if checkpoint_errors:
+    named = set(run.config.checkpoint.named_steps) | {run.step}
+    for s in checkpoint_steps(workdir):
+      if s in named:
+        if s == run.step:
+          res = results[:checkpoint_trajectories]
+        else:
+          res = rollout_split(train.load_run(workdir, s), test_path,
+                              checkpoint_trajectories or max_trajectories,
+                              unconstrained=False)
+        errors[s] = float(np.mean([np.mean(r["mse"]) for r in res]))
+    if errors:
+      figures.checkpoint_errors(errors, os.path.join(out_dir,
+                                                     "fig5_test_error.png"))
+  summary["checkpoint_test_mse"] = errors
+  summary["checkpoint_trajectories"] = (checkpoint_trajectories or
+                                        len(results))
+
+  table = table2(run, results, timing_repeats)
+  write_csv(os.path.join(out_dir, "table2.csv"), table)
+  summary["table2"] = table
+  mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
+  mpm_io.write_text(os.path.join(out_dir, "report.md"),
+                    report(summary, rows))
+  return summary
+
+
+def report(summary: dict, rows: Sequence[dict]) -> str:
+  """The Markdown report of an evaluation."""
+  lines = [
+      "# Evaluation", "",
+      f"Run `{summary['workdir']}` at step {summary['step']}, test split of "
+      f"`{summary['data']}`, on {summary['device']}. Learned step: "
+      f"{summary['frame_stride']} stored frame(s); rollouts start from the "
+      f"MPM's first {summary['input_frames']} frames at that stride; "
+      f"boundary particles: {summary['boundary_particles']}.", "",
+      f"Mean positional MSE over all test trajectories, particles and steps: "
+      f"**{summary['test_mse']:.3e} m^2** (constant velocity: "
+      f"{summary['test_mse_constant_velocity']:.3e} m^2).", "",
+      "## Does the sand stay out of the solids, and where does it stop?", "",
+      "Inside: fraction of the sand deeper than half a particle spacing in "
+      "the ramp or an obstacle (max over steps and trajectories); 'free': a "
+      "rollout of the same model without the solid constraint. Pushed: mean "
+      "fraction of the sand the constraint moved per step, and the deepest "
+      "push. Front error: |front_GNS - front_MPM| at the last frame over the "
+      "MPM's runout distance (median).", "",
+      "| group | n | mean MSE (m^2) | const. vel. | front error | deposit "
+      "error (m) | inside | outside | free: inside | pushed/step | deepest "
+      "push (m) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+  for g in summary["groups"]:
+    lines.append(
+        f"| {g['group']} | {g['trajectories']} | {g['mean_mse']:.2e} | "
+        f"{g['mean_mse_constant_velocity']:.2e} | "
+        f"{g['median_front_error_relative']:.1%} | "
+        f"{g['median_deposit_error']:.4f} | {g['max_inside_solids']:.1%} | "
+        f"{g['max_outside_domain']:.1%} | "
+        f"{g.get('free_max_inside_solids', float('nan')):.1%} | "
+        f"{g['mean_pushed_fraction']:.2%} | {g['max_pushed_depth']:.4f} |")
+  lines += [
+      "", "## Test error by checkpoint (Fig. 5)", "",
+      f"Over the first {summary['checkpoint_trajectories']} test "
+      "trajectories.", "", "| step | test MSE (m^2) |", "|---|---|"]
+  lines += [f"| {s} | {e:.3e} |" for s, e in
+            summary["checkpoint_test_mse"].items()]
+  lines += ["", "## Breakdowns (Figs. 6-9): mean MSE over time (m^2)", "",
+            "| figure | label | mean MSE | final MSE |", "|---|---|---|---|"]
+  for fig, groups in summary["curves"].items():
+    for label, curve in groups.items():
+      lines.append(f"| {fig} | {label} | {np.mean(curve):.3e} | "
+                   f"{curve[-1]:.3e} |")
+  lines += ["", "## Table 2: seconds per simulation, this hardware, one run",
+            "", "| group | particles | obstacles | frames | GNS steps | MPM (s) "
+            "| GNS (s) | MPM/GNS | GNS MSE (m^2) |",
+            "|---|---|---|---|---|---|---|---|---|"]
+  for r in summary["table2"]:
+    lines.append(f"| {r['group']} | {r['particles']} | {r['obstacles']} | "
+                 f"{r['frames']} | {r['gns_steps']} | {r['mpm_s']:.2f} | "
+                 f"{r['gns_s']:.2f} | {r['speedup']:.2f} | "
+                 f"{r['gns_mse']:.2e} |")
+  lines += [
+      "", "The paper's Table 2 reports 17-23 s for its MPM and 0.03-0.05 s for "
+      "its GNS on a V100 GPU, without saying how the GNS time was taken. Here "
+      "both run on the same device in the same process.", "",
+      "## Per trajectory", "",
+      "| # | group | particles | mean MSE | front error | deposit error (m) "
+      "| inside | free: inside at end |", "|---|---|---|---|---|---|---|---|"]
+  for r in rows:
+    lines.append(
+        f"| {r['index']} | {r['group']} | {r['particles']} | "
+        f"{r['mean_mse']:.2e} | {r['front_error_relative']:.1%} | "
+        f"{r['deposit_error']:.4f} | {r['max_inside_solids']:.1%} | "
+        f"{r.get('free_final_inside_solids', float('nan')):.1%} |")
+  return "\n".join(lines) + "\n"
