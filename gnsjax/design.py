@@ -204,18 +204,16 @@ class GNSRollout:
     others = [o for i, o in enumerate(scene.obstacles) if i != placement.index]
     ramp_points = geometry.ramp_surface(scene.ramp, scene.domain, spacing)
     fixed = [geometry.obstacle_params(o) for o in others]
-    if fixed:
-      covered = np.min([np.asarray(geometry._obstacle_sdf(self.ramp, o,
-                                                          ramp_points))  # pylint: disable=protected-access
-                        for o in fixed], axis=0) < 0
-      ramp_points = ramp_points[~covered]
+    static = geometry.boundary_nodes(
+        self.ramp, fixed, ramp_points,
+        [geometry.outline_fractions(geometry.outline_size(o, spacing))
+         for o in others])
+    ramp_points = ramp_points[~np.asarray(static.covered)]
     self.ramp_points = ramp_points.astype(np.float32)        # [Nr, 2]
     self.parking = graph.parking_positions(len(ramp_points), self.spec)
     self.other_outlines = np.concatenate(
-        [np.zeros((0, 2), np.float32)] + [
-            geometry._sample_outline(self.ramp, o,  # pylint: disable=protected-access
-                                     geometry.outline_size(s, spacing))
-            for o, s in zip(fixed, others)]).astype(np.float32)
+        [np.zeros((0, 2), np.float32)] +
+        [np.asarray(o) for o in static.outlines]).astype(np.float32)
     self.outline_points = geometry.outline_size(placement.obstacle, spacing)
     ns, nr = self.window.shape[1], len(ramp_points)
     nb = nr + len(self.other_outlines) + self.outline_points
@@ -393,8 +391,8 @@ class MPMRollout:
 
   def _check(self, params, finite, max_speed):
     name = f"{self.placement.scene.name} (obstacle x = {float(params['x']):g})"
-    mpm.simulation._check(name, 1, np.asarray(finite), np.asarray(max_speed),  # pylint: disable=protected-access
-                          self.setup.max_speed)
+    mpm.check_frames(name, 1, np.asarray(finite), np.asarray(max_speed),
+                     self.setup.max_speed)
 
   def rollout(self, params: Params) -> np.ndarray:
     """Sand positions [T, N, 2] (host); raises SimulationError on blow-up."""
