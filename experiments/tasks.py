@@ -13,8 +13,8 @@ import numpy as np
 import tqdm
 
 import mpm
+from experiments import figures
 from gnsjax import data
-from gnsjax import render
 from mpm import io as mpm_io
 
 
@@ -55,11 +55,12 @@ def render_file(traj_path: str, out_dir: str, index: int = 0,
                        f"{t.positions.shape}")
     panels.append(("GNS", other.positions))
   frames = [f for f in frames if f < len(t.positions)]
-  anim = render.animate(panels, t.scene, t.boundary_positions, t.boundary_type,
-                        os.path.join(out_dir, f"animation.{fmt}"))
-  grid = render.frame_grid(panels, t.scene, t.boundary_positions,
-                           t.boundary_type, frames,
-                           os.path.join(out_dir, "frames.png"))
+  anim = figures.animate(panels, t.scene, t.boundary_positions,
+                         t.boundary_type,
+                         os.path.join(out_dir, f"animation.{fmt}"))
+  grid = figures.frame_grid(panels, t.scene, t.boundary_positions,
+                            t.boundary_type, frames,
+                            os.path.join(out_dir, "frames.png"))
   return anim, grid
 
 

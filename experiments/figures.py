@@ -1,8 +1,11 @@
-"""Pictures of trajectories: animations and frame grids (matplotlib).
+"""Every figure of the project but the evaluation's (matplotlib lives here).
 
-Each picture has one or more panels side by side (e.g. MPM and GNS), each a
-trajectory [T, N, 2] of sand drawn over the scene: the ramp filled below its
-surface, boundary particles coloured by type.
+- ``animate`` and ``frame_grid``: trajectories as an animation and as a grid
+  of frames. Each picture has one or more panels side by side (e.g. MPM and
+  GNS), each a trajectory [T, N, 2] (m) of sand drawn over the scene: the
+  ramp filled below its surface, boundary particles coloured by type.
+
+The libraries (``mpm``, ``gnsjax``) import no matplotlib.
 """
 
 import shutil
@@ -101,3 +104,4 @@ def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
   fig.savefig(out, dpi=80)
   plt.close(fig)
   return out
+
