@@ -4,6 +4,8 @@
   of frames. Each picture has one or more panels side by side (e.g. MPM and
   GNS), each a trajectory [T, N, 2] (m) of sand drawn over the scene: the
   ramp filled below its surface, boundary particles coloured by type.
+- ``objective_vs_x``: an inverse-design study's objective against the
+  obstacle's x (m), by MPM and GNS sweeps, with the optimiser's path.
 
 The libraries (``mpm``, ``gnsjax``) import no matplotlib.
 """
@@ -105,3 +107,36 @@ def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
   plt.close(fig)
   return out
 
+
+def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
+                   objective: str, simulator: str, out: str) -> str:
+  """Writes a PNG of the smooth objective against the obstacle's x.
+
+  Args:
+    sweep: per simulator ("mpm", "gns"), rows with "x" (m) and "smooth"
+      (``gnsjax.design.study.StudyResult.sweep``).
+    history: the optimiser's records, with "x" and "objective".
+    objective: its name (the y label).
+    simulator: whose gradients the optimiser followed.
+    out: the PNG's path.
+
+  Returns:
+    The path written.
+  """
+  fig, ax = plt.subplots(figsize=(6, 4))
+  for name, style in (("mpm", "k-o"), ("gns", "b-s")):
+    if name in sweep:
+      ax.plot([r["x"] for r in sweep[name]],
+              [r["smooth"] for r in sweep[name]], style, ms=4,
+              label=f"{name.upper()} sweep")
+  ax.plot([r["x"] for r in history], [r["objective"] for r in history],
+          "r.--", label=f"Adam on {simulator.upper()} gradients")
+  ax.plot(history[0]["x"], history[0]["objective"], "r^", ms=8,
+          label="start")
+  ax.set_xlabel("obstacle x (m)")
+  ax.set_ylabel(f"{objective} (smooth)")
+  ax.legend(fontsize=8)
+  fig.tight_layout()
+  fig.savefig(out, dpi=100)
+  plt.close(fig)
+  return out

@@ -36,6 +36,13 @@ class FiguresTest(absltest.TestCase):
     for path in (gif, png):
       self.assertGreater(os.path.getsize(path), 0, path)
 
+  def test_objective_vs_x(self):
+    sweep = {"mpm": [{"x": 0.5, "smooth": 0.2}, {"x": 1.3, "smooth": 0.4}]}
+    history = [{"x": 1.0, "objective": 0.3}, {"x": 0.95, "objective": 0.28}]
+    path = figures.objective_vs_x(sweep, history, "passed_fraction", "mpm",
+                                  os.path.join(self.dir, "o.png"))
+    self.assertGreater(os.path.getsize(path), 0)
+
 
 if __name__ == "__main__":
   absltest.main()
