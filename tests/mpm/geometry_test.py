@@ -1,4 +1,4 @@
-"""Tests for `mpm.geometry`: boundary particles and their differentiable form."""
+"""Tests for `mpm.geometry`: boundary particles, differentiable form."""
 
 from absl.testing import absltest
 from absl.testing import parameterized

@@ -1,4 +1,4 @@
-"""Tests for `mpm.interop`: the npz layout of DeepMind's and geoelements' GNS."""
+"""Tests for `mpm.interop`: npz datasets of DeepMind's and geoelements' GNS."""
 
 import json
 import os
