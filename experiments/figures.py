@@ -1,20 +1,150 @@
-"""Every picture of the project (matplotlib lives here and nowhere else).
+"""Every figure of the project (matplotlib lives here and nowhere else).
 
-Evaluation figures: training curves (the paper's Figs. 3-4), test error by
-checkpoint (Fig. 5), error-against-time breakdowns (Figs. 6-9), and the flow
-checks a positional MSE misses (sand inside solids or outside the domain,
-front error, the constraint's work) per step.
+- ``animate`` and ``frame_grid``: trajectories as an animation and as a grid
+  of frames. Each picture has one or more panels side by side (e.g. MPM and
+  GNS), each a trajectory [T, N, 2] (m) of sand drawn over the scene: the
+  ramp filled below its surface, boundary particles coloured by type.
+- ``objective_vs_x``: an inverse-design study's objective against the
+  obstacle's x (m), by MPM and GNS sweeps, with the optimiser's path.
+- The evaluation's figures: training curves (the paper's Figs. 3-4), test
+  error by checkpoint (Fig. 5), error-against-time breakdowns (Figs. 6-9),
+  and the flow checks a positional MSE misses (sand inside solids or outside
+  the domain, front error, the constraint's work) per step.
+
+The libraries (``mpm``, ``gnsjax``) import no matplotlib.
 """
 
 import os
+import shutil
 from typing import Sequence
 
 import matplotlib
 
 matplotlib.use("Agg")
 # pylint: disable=g-import-not-at-top,wrong-import-position
+import matplotlib.animation as animation
 import matplotlib.pyplot as plt
 import numpy as np
+
+import mpm
+
+_SAND = "#1f77b4"
+_TYPE_COLOURS = {mpm.RAMP_TYPE: "#222222", mpm.OBSTACLE_TYPE: "#8c2d04"}
+
+
+def _draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
+  w, h = scene.domain.width, scene.domain.height
+  x = np.linspace(0, w, 400)
+  ax.fill_between(x, 0, np.minimum(scene.ramp.height(x), h), color="#dddddd",
+                  zorder=0)
+  for t, colour in _TYPE_COLOURS.items():
+    pts = boundary_positions[boundary_types == t]
+    ax.scatter(pts[:, 0], pts[:, 1], s=1.5, c=colour, zorder=2, linewidths=0)
+  ax.set_xlim(0, w)
+  ax.set_ylim(0, h)
+  ax.set_aspect("equal")
+  ax.set_xticks([])
+  ax.set_yticks([])
+
+
+def _panels(n: int, width: float = 5.0):
+  fig, axes = plt.subplots(1, n, figsize=(width * n, width * 0.75),
+                           squeeze=False)
+  return fig, axes[0]
+
+
+def animate(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
+            boundary_positions: np.ndarray, boundary_types: np.ndarray,
+            out: str, *, stride: int = 4, fps: int = 25) -> str:
+  """Writes an animation of one or more trajectories side by side.
+
+  Args:
+    panels: (title, positions [T, N, 2]) pairs with equal T.
+    out: path; ``.mp4`` needs ffmpeg on PATH (else a ``.gif`` is written
+      beside it), ``.gif`` needs only Pillow.
+    stride: draw every ``stride``-th frame.
+
+  Returns:
+    The path written.
+  """
+  if out.endswith(".mp4") and shutil.which("ffmpeg") is None:
+    out = out[:-4] + ".gif"
+  fig, axes = _panels(len(panels))
+  dots = []
+  for ax, (title, x) in zip(axes, panels):
+    _draw_scene(ax, scene, boundary_positions, boundary_types)
+    ax.set_title(title)
+    dots.append(ax.scatter(x[0, :, 0], x[0, :, 1], s=2, c=_SAND, zorder=3,
+                           linewidths=0))
+  label = fig.suptitle("")
+  frames = range(0, len(panels[0][1]), stride)
+
+  def update(t):
+    for d, (_, x) in zip(dots, panels):
+      d.set_offsets(x[t])
+    label.set_text(f"t = {t * scene.frame_dt:.3f} s (frame {t})")
+    return dots + [label]
+
+  anim = animation.FuncAnimation(fig, update, frames=frames, blit=False)
+  writer = (animation.FFMpegWriter(fps=fps) if out.endswith(".mp4") else
+            animation.PillowWriter(fps=fps))
+  anim.save(out, writer=writer, dpi=80)
+  plt.close(fig)
+  return out
+
+
+def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
+               boundary_positions: np.ndarray, boundary_types: np.ndarray,
+               frames: Sequence[int], out: str) -> str:
+  """Writes a PNG grid: one row per chosen frame, one column per panel
+  (the layout of the paper's Figure 2)."""
+  fig, axes = plt.subplots(len(frames), len(panels),
+                           figsize=(4.5 * len(panels), 3.4 * len(frames)),
+                           squeeze=False)
+  for row, t in enumerate(frames):
+    for col, (title, x) in enumerate(panels):
+      ax = axes[row, col]
+      _draw_scene(ax, scene, boundary_positions, boundary_types)
+      ax.scatter(x[t, :, 0], x[t, :, 1], s=2, c=_SAND, zorder=3, linewidths=0)
+      ax.set_title(f"{title}, frame {t}")
+  fig.tight_layout()
+  fig.savefig(out, dpi=80)
+  plt.close(fig)
+  return out
+
+
+def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
+                   objective: str, simulator: str, out: str) -> str:
+  """Writes a PNG of the smooth objective against the obstacle's x.
+
+  Args:
+    sweep: per simulator ("mpm", "gns"), rows with "x" (m) and "smooth"
+      (``gnsjax.design.study.StudyResult.sweep``).
+    history: the optimiser's records, with "x" and "objective".
+    objective: its name (the y label).
+    simulator: whose gradients the optimiser followed.
+    out: the PNG's path.
+
+  Returns:
+    The path written.
+  """
+  fig, ax = plt.subplots(figsize=(6, 4))
+  for name, style in (("mpm", "k-o"), ("gns", "b-s")):
+    if name in sweep:
+      ax.plot([r["x"] for r in sweep[name]],
+              [r["smooth"] for r in sweep[name]], style, ms=4,
+              label=f"{name.upper()} sweep")
+  ax.plot([r["x"] for r in history], [r["objective"] for r in history],
+          "r.--", label=f"Adam on {simulator.upper()} gradients")
+  ax.plot(history[0]["x"], history[0]["objective"], "r^", ms=8,
+          label="start")
+  ax.set_xlabel("obstacle x (m)")
+  ax.set_ylabel(f"{objective} (smooth)")
+  ax.legend(fontsize=8)
+  fig.tight_layout()
+  fig.savefig(out, dpi=100)
+  plt.close(fig)
+  return out
 
 
 def _save(fig, path: str):

@@ -24,7 +24,8 @@ _COMPARE = flags.DEFINE_string(
 def main(argv):
   del argv
   for path in tasks.render_file(_TRAJ.value, _OUT.value, _INDEX.value,
-                          [int(f) for f in _FRAMES.value], _FORMAT.value):
+                                [int(f) for f in _FRAMES.value],
+                                _FORMAT.value, compare_path=_COMPARE.value):
     print(path)
 
 

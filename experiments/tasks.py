@@ -13,8 +13,8 @@ import numpy as np
 import tqdm
 
 import mpm
+from experiments import figures
 from gnsjax import data
-from gnsjax import render
 from mpm import io as mpm_io
 
 
@@ -55,11 +55,12 @@ def render_file(traj_path: str, out_dir: str, index: int = 0,
                        f"{t.positions.shape}")
     panels.append(("GNS", other.positions))
   frames = [f for f in frames if f < len(t.positions)]
-  anim = render.animate(panels, t.scene, t.boundary_positions, t.boundary_type,
-                        os.path.join(out_dir, f"animation.{fmt}"))
-  grid = render.frame_grid(panels, t.scene, t.boundary_positions,
-                           t.boundary_type, frames,
-                           os.path.join(out_dir, "frames.png"))
+  anim = figures.animate(panels, t.scene, t.boundary_positions,
+                         t.boundary_type,
+                         os.path.join(out_dir, f"animation.{fmt}"))
+  grid = figures.frame_grid(panels, t.scene, t.boundary_positions,
+                            t.boundary_type, frames,
+                            os.path.join(out_dir, "frames.png"))
   return anim, grid
 
 
@@ -228,7 +229,7 @@ def design_scene(shape: str = "semicircle", size: Sequence[float] = (0.04,),
                  spacing: float = 0.01, num_particles: int = 250
                  ) -> mpm.Scene:
   """The paper's heap at the small config's spacing with one obstacle."""
-  from gnsjax import design  # pylint: disable=g-import-not-at-top
+  from gnsjax.design import placement  # pylint: disable=g-import-not-at-top
   from mpm import scene as scene_lib  # pylint: disable=g-import-not-at-top
   keys = scene_lib.OBSTACLE_SHAPES[shape]
   if len(size) != len(keys):
@@ -239,7 +240,7 @@ def design_scene(shape: str = "semicircle", size: Sequence[float] = (0.04,),
       "granular": {"box": list(scene_lib.Granular.box), "spacing": spacing,
                    "num_particles": num_particles},
       "num_frames": num_frames})
-  return design.with_obstacle(base, shape, x0, **dict(zip(keys, size)))
+  return placement.with_obstacle(base, shape, x0, **dict(zip(keys, size)))
 
 
 def inverse_design(out_dir: str, *, scene_path: str | None = None,
@@ -251,19 +252,23 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
                    workdir: str | None = PRETRAINED, steps: int = 8,
                    learning_rate: float = 0.05, sweep_points: int = 9,
                    optimise_size: bool = False) -> dict:
-  """The inverse-design study (``gnsjax.design_study.study``) of a scene."""
-  from gnsjax import design_study  # pylint: disable=g-import-not-at-top
-  from gnsjax import objectives  # pylint: disable=g-import-not-at-top
+  """The inverse-design study (``gnsjax.design.study.study``) of a scene,
+  with its plot ``objective_vs_x.png``; returns the summary."""
+  from gnsjax.design import objectives  # pylint: disable=g-import-not-at-top
+  from gnsjax.design import study  # pylint: disable=g-import-not-at-top
   if scene_path is not None:
     scene = mpm.Scene.load(scene_path)
   else:
     scene = design_scene(shape, size, x0, num_frames)
   obj = objectives.make(objective, x_protect=x_protect, target_x=target_x,
                         temperature=temperature)
-  return design_study.study(
+  result = study.study(
       out_dir, scene, obj, simulator=simulator, workdir=workdir or None,
       steps=steps, learning_rate=learning_rate, sweep_points=sweep_points,
       optimise_size=optimise_size, log=lambda line: tqdm.tqdm.write(line))
+  figures.objective_vs_x(result.sweep, result.history, obj.name, simulator,
+                         os.path.join(out_dir, "objective_vs_x.png"))
+  return result.summary
 
 
 # The training recipe's parts, added one at a time (docs/gns.md): each entry

@@ -9,6 +9,10 @@ Modules (import them directly; importing ``gnsjax`` loads nothing heavy):
 - ``gnsjax.simulator``, ``gnsjax.rollout``: one step, and rollouts under scan.
 - ``gnsjax.train``, ``gnsjax.checkpoint``: training with optax and orbax.
 - ``gnsjax.metrics``, ``gnsjax.evaluate``: the paper's evaluation.
-- ``gnsjax.render``: animations and frame grids.
-- ``gnsjax.interop``: npz datasets of DeepMind's and geoelements' GNS.
+- ``gnsjax.design``: inverse design of an obstacle's placement by gradients
+  through the GNS or the MPM (a package: placement, objectives, rollouts,
+  optimize, study).
+
+Pictures are drawn in ``experiments.figures``; npz datasets of DeepMind's and
+geoelements' GNS are read and written by ``mpm.interop``.
 """

@@ -7,7 +7,9 @@ Typical use::
   result = mpm.simulate(scene)          # positions [T, N, 2]
 
 Pure building blocks (``mpm.solver.rollout``, ``mpm.setup``) are for batching,
-``jax.grad`` and custom drivers. This package imports only jax and numpy.
+``jax.grad`` and custom drivers. This package imports only jax and numpy;
+``mpm.io`` (trajectory files) and ``mpm.interop`` (npz datasets of other GNS
+codes) add h5py and are imported only on request.
 """
 
 from mpm.geometry import KINEMATIC_TYPES
@@ -25,6 +27,7 @@ from mpm.scene import Scene
 from mpm.simulation import SimulationError
 from mpm.simulation import SimulationResult
 from mpm.simulation import Setup
+from mpm.simulation import check_frames
 from mpm.simulation import setup
 from mpm.simulation import simulate
 from mpm.simulation import simulate_batch
@@ -36,6 +39,8 @@ from mpm.solver import rollout
 __all__ = [
     "KINEMATIC_TYPES", "OBSTACLE_TYPE", "RAMP_TYPE", "SAND_TYPE",
     "MPMState", "SDFGrid", "Scene", "Setup", "SimParams", "SimulationError",
-    "SimulationResult", "boundary_particles", "granular_particles", "push_out", "rollout",
-    "sample_scene", "sample_sdf", "scene_sdf_grid", "setup", "simulate", "simulate_batch", "simulate_setups",
+    "SimulationResult", "boundary_particles", "check_frames",
+    "granular_particles", "push_out", "rollout", "sample_scene", "sample_sdf",
+    "scene_sdf_grid", "setup", "simulate", "simulate_batch",
+    "simulate_setups",
 ]

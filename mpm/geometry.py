@@ -13,6 +13,7 @@ between a straight base and the curved surface.
 """
 
 import math
+from typing import NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -283,7 +284,6 @@ def scene_sdf_grid(scene: scene_lib.Scene, spacing: float) -> SDFGrid:
 # Host-side helpers evaluate these on many points: one compiled program each
 # instead of hundreds of eagerly dispatched ops.
 _solid_sdf = jax.jit(solid_sdf)
-_obstacle_sdf = jax.jit(obstacle_sdf)
 
 
 def outline_size(obstacle: scene_lib.Obstacle, spacing: float) -> int:
@@ -303,7 +303,7 @@ def obstacle_outline(ramp: RampParams, obstacle: ObstacleParams,
 
   The exposed outline runs from one end of the base (s = 0), over the top, to
   the other (s = 1); it is a differentiable function of the obstacle's x and
-  size. ``jnp.linspace(0, 1, outline_size(...))`` samples it at the particle
+  size. ``outline_fractions(outline_size(...))`` samples it at the particle
   spacing.
   """
   base, tangent, normal = obstacle_frame(ramp, obstacle)
@@ -328,15 +328,73 @@ def obstacle_outline(ramp: RampParams, obstacle: ObstacleParams,
           local[:, 1:] * normal[None])
 
 
-_obstacle_outline = jax.jit(obstacle_outline)
+def outline_fractions(n_points: int, bucket: int = 1) -> np.ndarray:
+  """Fractions s float32 [P'] of ``n_points`` evenly spaced outline particles.
 
-
-def _sample_outline(ramp, obstacle, n_points: int) -> np.ndarray:
-  # Padded to a multiple of 64 points: one compiled program per bucket.
-  s = np.ones(-(-n_points // 64) * 64, np.float32)
+  Args:
+    n_points: P, from ``outline_size``.
+    bucket: pads P up to a multiple of ``bucket`` with s = 1 (repeats of the
+      last point, to be sliced off), so that outlines of similar length share
+      one compiled program.
+  """
+  s = np.ones(-(-n_points // bucket) * bucket, np.float32)
   s[:n_points] = np.linspace(0.0, 1.0, n_points)
-  return np.asarray(_obstacle_outline(ramp, obstacle, jnp.asarray(s)))[
-      :n_points]
+  return s
+
+
+class BoundaryNodes(NamedTuple):
+  """Boundary particle positions of a ramp and its obstacles (m).
+
+  Attributes:
+    ramp: [M, 2] the ramp points; those an obstacle covers are replaced by
+      their parking position when one was given, else left in place.
+    outlines: one [P_k, 2] per obstacle, its exposed outline.
+    covered: bool [M], the ramp points inside an obstacle.
+  """
+  ramp: jax.Array
+  outlines: tuple[jax.Array, ...]
+  covered: jax.Array
+
+
+def boundary_nodes(ramp: RampParams, obstacles: Sequence[ObstacleParams],
+                   ramp_points: jax.Array, fractions: Sequence[jax.Array],
+                   parking: jax.Array | None = None) -> BoundaryNodes:
+  """The boundary particles as a differentiable function of the obstacles.
+
+  Pure (jit it at the call site); the node count depends only on the shapes
+  of ``ramp_points`` and ``fractions``, so an obstacle can move under
+  ``jax.grad`` while the learned simulator's graph keeps its size. The
+  outlines are differentiable in each obstacle's ``x`` and ``size``; the
+  cover mask is a comparison (no gradient), and parked ramp points are
+  constants.
+
+  Args:
+    ramp: the ramp.
+    obstacles: K obstacles (traced x and size; static shape).
+    ramp_points: [M, 2] ramp surface points (m), e.g. ``ramp_surface``.
+    fractions: K arrays [P_k] of outline fractions in [0, 1], e.g.
+      ``outline_fractions(outline_size(...))``.
+    parking: optional [M, 2] positions for covered ramp points (the learned
+      simulator's parking sites, out of every other node's reach).
+
+  Returns:
+    The ramp points (covered ones parked), the K outlines and the cover mask.
+  """
+  ramp_points = jnp.asarray(ramp_points)
+  covered = jnp.zeros(ramp_points.shape[:1], bool)
+  for obstacle in obstacles:
+    covered = covered | (obstacle_sdf(ramp, obstacle, ramp_points) < 0)
+  nodes = ramp_points
+  if parking is not None:
+    nodes = jnp.where(covered[:, None], parking, ramp_points)
+  outlines = tuple(obstacle_outline(ramp, o, jnp.asarray(s))
+                   for o, s in zip(obstacles, fractions))
+  return BoundaryNodes(nodes, outlines, covered)
+
+
+# One obstacle per call: one compiled program per shape and outline bucket,
+# shared by every scene of a dataset.
+_boundary_nodes = jax.jit(boundary_nodes)
 
 
 def ramp_surface(ramp: scene_lib.Ramp, domain: scene_lib.Domain,
@@ -355,7 +413,8 @@ def boundary_particles(scene: scene_lib.Scene) -> tuple[np.ndarray, np.ndarray]:
   """Static boundary particles of a scene, for the learned simulator.
 
   The ramp surface (where no obstacle covers it) and each obstacle's exposed
-  outline, sampled at the granular particle spacing.
+  outline, sampled at the granular particle spacing: ``boundary_nodes`` with
+  the covered ramp points dropped.
 
   Returns:
     positions: float32 [Nb, 2] (m).
@@ -363,17 +422,20 @@ def boundary_particles(scene: scene_lib.Scene) -> tuple[np.ndarray, np.ndarray]:
   """
   spacing = scene.granular.spacing
   ramp = ramp_params(scene.ramp)
-  obstacles = [obstacle_params(o) for o in scene.obstacles]
   surface = ramp_surface(scene.ramp, scene.domain, spacing)
-  if obstacles:
-    covered = np.min(np.stack([np.asarray(_obstacle_sdf(ramp, o, surface))
-                               for o in obstacles]), axis=0) < 0
-    surface = surface[~covered]
-  parts = [surface] + [_sample_outline(ramp, o, outline_size(s, spacing))
-                       for o, s in zip(obstacles, scene.obstacles)]
+  covered = np.zeros(len(surface), bool)
+  outlines = []
+  for o in scene.obstacles:
+    n = outline_size(o, spacing)
+    nodes = _boundary_nodes(ramp, (obstacle_params(o),), surface,
+                            (outline_fractions(n, bucket=64),))
+    covered |= np.asarray(nodes.covered)
+    outlines.append(np.asarray(nodes.outlines[0])[:n])
+  surface = surface[~covered]
   types = [np.full(len(surface), RAMP_TYPE, np.int32)] + [
-      np.full(len(p), OBSTACLE_TYPE, np.int32) for p in parts[1:]]
-  return (np.concatenate(parts).astype(np.float32), np.concatenate(types))
+      np.full(len(p), OBSTACLE_TYPE, np.int32) for p in outlines]
+  return (np.concatenate([surface] + outlines).astype(np.float32),
+          np.concatenate(types))
 
 
 def granular_particles(scene: scene_lib.Scene) -> np.ndarray:

@@ -200,8 +200,24 @@ def chunking(num_frames: int, chunk_frames: int) -> tuple[int, int]:
   return n_chunks, -(-steps // n_chunks)
 
 
-def _check(scene_name, first_frame, finite, max_speed, bound):
-  """Raises SimulationError at the first frame that is non-finite or too fast."""
+def check_frames(scene_name: str, first_frame: int, finite: np.ndarray,
+                 max_speed: np.ndarray, bound: float) -> None:
+  """Raises SimulationError at the first frame that is non-finite or too fast.
+
+  Host-side (call it on a rollout's outputs, outside ``jit``): the driver
+  checks every chunk before running the next, inverse design every rollout.
+
+  Args:
+    scene_name: named in the error.
+    first_frame: the frame number of ``finite[0]``.
+    finite: bool [F], whether each frame's positions are finite.
+    max_speed: [F] largest particle speed during each frame (m/s).
+    bound: the speed (m/s) the substep count was chosen for
+      (``Setup.max_speed``).
+
+  Raises:
+    SimulationError: naming the scene and the first bad frame.
+  """
   for k in range(len(finite)):
     if not finite[k]:
       raise SimulationError(scene_name, first_frame + k,
@@ -299,7 +315,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     # unchecked.
     keep = min(frames, first.scene.num_frames - 1 - chunk * frames)
     for b, s in enumerate(setups):
-      _check(s.scene.name, 1 + chunk * frames, pick(finite, b)[:keep],
+      check_frames(s.scene.name, 1 + chunk * frames, pick(finite, b)[:keep],
              pick(vmax, b)[:keep], s.max_speed)
     positions.append(x)
     speeds.append(vmax)

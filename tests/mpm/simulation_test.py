@@ -144,6 +144,21 @@ class SimulationErrorTest(absltest.TestCase):
     self.assertTrue(np.any(bad))
     self.assertEqual(e.frame, 1 + int(np.argmax(bad)))
 
+  def test_check_frames_names_the_scene_and_first_bad_frame(self):
+    finite = np.array([True, True, False, False])
+    speed = np.array([0.5, 0.9, np.nan, np.nan], np.float32)
+    with self.assertRaisesRegex(mpm.SimulationError,
+                                "'s', frame 12: positions are not finite"
+                                ) as cm:
+      mpm.check_frames("s", 10, finite, speed, 1.0)
+    self.assertEqual((cm.exception.scene_name, cm.exception.frame), ("s", 12))
+    too_fast = np.array([0.5, 1.5, 2.0], np.float32)
+    with self.assertRaisesRegex(mpm.SimulationError,
+                                r"frame 2: particle speed 1.500.*CFL") as cm:
+      mpm.check_frames("s", 1, np.ones(3, bool), too_fast, 1.0)
+    self.assertEqual(cm.exception.frame, 2)
+    mpm.check_frames("s", 1, np.ones(2, bool), np.array([0.5, 1.0]), 1.0)
+
   def test_stable_scene_does_not_raise(self):
     result = mpm.simulate(_scene("fine"))
     self.assertTrue(np.all(result.max_speed <= mpm.setup(

@@ -12,6 +12,8 @@ so those codes treat them as kinematic; import turns type-3 particles that
 never move into boundary particles and keeps the others as moving particles
 with their original types. An imported trajectory carries a placeholder scene
 recording only its domain and frame time.
+
+Beside ``mpm.io`` (h5py): ``import mpm`` loads neither.
 """
 
 import json

@@ -6,30 +6,41 @@ compare with the brute-force sweep a user would otherwise run.
 - ``history.csv``: the optimiser's iterations (placement, objective, gradient,
   seconds);
 - ``sweep.csv``: the objective against x by MPM and GNS forward rollouts;
-- ``objective_vs_x.png``: both curves with the optimiser's path;
 - ``summary.json`` and ``report.md``: the MPM's verdict on the start and the
   optimum, and time and objective of the optimiser against the sweep.
+
+It returns them too, for plots (``experiments.figures.objective_vs_x``).
 """
 
 import csv
 import os
-import time
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
-import matplotlib
-
-matplotlib.use("Agg")
-# pylint: disable=g-import-not-at-top,wrong-import-position
-import matplotlib.pyplot as plt
 import numpy as np
 
 import mpm
-from gnsjax import design
 from gnsjax import evaluate
-from gnsjax import objectives
+from gnsjax.design import objectives
+from gnsjax.design import optimize
+from gnsjax.design import placement as placement_lib
+from gnsjax.design import rollouts
 from mpm import io as mpm_io
 
 SIMULATORS = ("gns", "mpm")
+
+
+class StudyResult(NamedTuple):
+  """What ``study`` wrote.
+
+  Attributes:
+    summary: the contents of summary.json.
+    history: the optimiser's records (history.csv).
+    sweep: per simulator ("mpm", and "gns" with a model), the sweep's rows
+      (x, plain, smooth, seconds) over x.
+  """
+  summary: dict[str, Any]
+  history: list[dict]
+  sweep: dict[str, list[dict]]
 
 
 def _write_csv(path: str, rows: list[dict]):
@@ -43,7 +54,7 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
           simulator: str = "gns", workdir: str | None = None,
           steps: int = 8, learning_rate: float = 0.05,
           sweep_points: int = 9, optimise_size: bool = False,
-          log: Callable[[str], None] = print) -> dict[str, Any]:
+          log: Callable[[str], None] = print) -> StudyResult:
   """Optimises the first obstacle's x of ``scene`` and checks the result.
 
   Args:
@@ -62,14 +73,16 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
     raise ValueError(f"simulator: unknown {simulator!r}; allowed: "
                      f"{list(SIMULATORS)}")
   os.makedirs(out_dir, exist_ok=True)
-  placement = design.Placement(
+  placement = placement_lib.Placement(
       scene, free=("x", "size") if optimise_size else ("x",))
-  sims = {"mpm": design.MPMRollout(placement)}
+  sims = {"mpm": rollouts.MPMDriver(rollouts.MPMRollout.create(placement))}
   if workdir is not None:
     config, problem, trainer, state, _ = evaluate.load_run(workdir,
                                                            scene=scene)
-    sims["gns"] = design.GNSRollout(placement, trainer.model, state.params,
-                                    problem, config.train.input_frames)
+    window = rollouts.mpm_window(scene, config.train.input_frames)
+    sims["gns"] = rollouts.GNSDriver(
+        rollouts.GNSRollout.create(placement, trainer.model, problem, window),
+        state.params)
   if simulator not in sims:
     raise ValueError("simulator='gns' needs the trained model's workdir")
 
@@ -79,16 +92,16 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
         f"{r['seconds']:.1f} s")
 
   start = placement.initial()
-  history = design.optimise(sims[simulator], objective.smooth, start,
-                            steps=steps, learning_rate=learning_rate,
-                            log=log_record)
+  history = optimize.optimise(sims[simulator], objective.smooth, start,
+                              steps=steps, learning_rate=learning_rate,
+                              log=log_record)
   _write_csv(os.path.join(out_dir, "history.csv"), history)
   best = min(history, key=lambda r: r["objective"])
 
   # The MPM's verdict on the start and on the optimum.
   verdict = {}
   for label, record in (("start", history[0]), ("optimum", best)):
-    params = _params(record, optimise_size)
+    params = optimize.from_record(record, optimise_size)
     positions = sims["mpm"].rollout(params)
     verdict[label] = {"x": record["x"], "plain": objective.plain(positions),
                       "smooth": float(objective.smooth(positions)),
@@ -102,8 +115,8 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
   rows = {}
   for name, sim in sims.items():
     sim.rollout(start)
-    rows[name] = design.sweep(sim, objective.plain, objective.smooth, start,
-                              xs)
+    rows[name] = optimize.sweep(sim, objective.plain, objective.smooth,
+                                start, xs)
   sweep_rows = [{"x": float(x), **{f"{n}_{k}": rows[n][i][k]
                                     for n in rows for k in ("plain", "smooth",
                                                             "seconds")}}
@@ -129,41 +142,13 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
              if "gns" in rows else {})},
   }
   mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
-  _plot(rows, history, objective, simulator,
-        os.path.join(out_dir, "objective_vs_x.png"))
   with open(os.path.join(out_dir, "report.md"), "w") as f:
     f.write(report(summary))
-  return summary
-
-
-def _params(record: dict, with_size: bool) -> design.Params:
-  """The placement of a history record."""
-  params = {"x": np.float32(record["x"])}
-  if with_size:
-    params["size"] = np.asarray([record["size0"], record["size1"]],
-                                np.float32)
-  return params
-
-
-def _plot(rows, history, objective, simulator, path):
-  fig, ax = plt.subplots(figsize=(6, 4))
-  for name, style in (("mpm", "k-o"), ("gns", "b-s")):
-    if name in rows:
-      ax.plot([r["x"] for r in rows[name]], [r["smooth"] for r in rows[name]],
-              style, ms=4, label=f"{name.upper()} sweep")
-  ax.plot([r["x"] for r in history], [r["objective"] for r in history],
-          "r.--", label=f"Adam on {simulator.upper()} gradients")
-  ax.plot(history[0]["x"], history[0]["objective"], "r^", ms=8,
-          label="start")
-  ax.set_xlabel("obstacle x (m)")
-  ax.set_ylabel(f"{objective.name} (smooth)")
-  ax.legend(fontsize=8)
-  fig.tight_layout()
-  fig.savefig(path, dpi=100)
-  plt.close(fig)
+  return StudyResult(summary, history, rows)
 
 
 def report(summary: dict) -> str:
+  """report.md: the optimiser, the MPM's verdict and the sweep, in words."""
   o, v, s = summary["optimiser"], summary["mpm_verdict"], summary["sweep"]
   unit = f" {summary['unit']}" if summary["unit"] else ""
   lines = [

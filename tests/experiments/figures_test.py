@@ -1,0 +1,48 @@
+"""Tests for `experiments.figures` on synthetic trajectories (no simulation)."""
+
+import os
+import tempfile
+
+from absl.testing import absltest
+import numpy as np
+
+import mpm
+from experiments import figures
+
+SCENE = mpm.Scene.from_dict({
+    "name": "pictures", "domain": {"width": 0.4, "height": 0.3},
+    "ramp": {"kind": "polyline", "points": [[0.0, 0.05], [0.4, 0.15]]},
+    "granular": {"box": [0.25, 0.12, 0.35, 0.2], "spacing": 0.01},
+    "num_frames": 5})
+
+
+class FiguresTest(absltest.TestCase):
+
+  def setUp(self):
+    super().setUp()
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    self.dir = tmp.name
+    rng = np.random.default_rng(0)
+    self.x = rng.uniform([0.25, 0.15], [0.35, 0.2], (5, 30, 2))
+    self.boundary = mpm.boundary_particles(SCENE)
+
+  def test_animation_and_frame_grid_of_two_panels(self):
+    panels = [("MPM", self.x), ("GNS", self.x[:, ::-1])]
+    gif = figures.animate(panels, SCENE, *self.boundary,
+                          os.path.join(self.dir, "a.gif"), stride=2)
+    png = figures.frame_grid(panels, SCENE, *self.boundary, [0, 4],
+                             os.path.join(self.dir, "f.png"))
+    for path in (gif, png):
+      self.assertGreater(os.path.getsize(path), 0, path)
+
+  def test_objective_vs_x(self):
+    sweep = {"mpm": [{"x": 0.5, "smooth": 0.2}, {"x": 1.3, "smooth": 0.4}]}
+    history = [{"x": 1.0, "objective": 0.3}, {"x": 0.95, "objective": 0.28}]
+    path = figures.objective_vs_x(sweep, history, "passed_fraction", "mpm",
+                                  os.path.join(self.dir, "o.png"))
+    self.assertGreater(os.path.getsize(path), 0)
+
+
+if __name__ == "__main__":
+  absltest.main()

@@ -1,0 +1,50 @@
+"""A small design scene and an untrained GNS for the inverse-design tests."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import mpm
+from gnsjax import features
+from gnsjax import graph
+from gnsjax import models
+from gnsjax import train
+from gnsjax.design import placement as placement_lib
+from gnsjax.design import rollouts
+
+C = 6
+# A small heap (spacing 0.01 m, 60 particles) released onto a semicircle:
+# the obstacle acts on the sand from the first frames.
+X = 1.28
+SCENE = {
+    "name": "design_test",
+    "obstacles": [{"shape": "semicircle", "x": X, "radius": 0.03}],
+    "granular": {"box": [1.25, 0.5, 1.46, 1.19], "spacing": 0.01,
+                 "num_particles": 60},
+}
+
+
+def scene(**overrides) -> mpm.Scene:
+  return mpm.Scene.from_dict({**SCENE, **overrides})
+
+
+def tiny_gns(placement: placement_lib.Placement, num_frames: int,
+             window: np.ndarray | None = None) -> rollouts.GNSDriver:
+  """A GNS driver of an untrained two-step model (random weights); the
+  window is the MPM's unless given."""
+  model = models.EncodeProcessDecode(latent_size=16, hidden_layers=1,
+                                     num_message_passing_steps=2,
+                                     type_embedding_size=4)
+  params = model.init(jax.random.key(0), jnp.zeros((4, 2 * (C - 1) + 4)),
+                      jnp.full(4, mpm.SAND_TYPE), jnp.zeros((4, 3)),
+                      jnp.zeros(4, jnp.int32), jnp.zeros(4, jnp.int32))
+  bounds = ((0.0, 1.65), (0.0, 1.19))
+  stats = features.Stats(np.zeros(2, np.float32), np.full(2, 1e-3, np.float32),
+                         np.zeros(2, np.float32), np.full(2, 1e-3, np.float32))
+  problem = train.Problem(stats, np.asarray(bounds, np.float32), 0.03,
+                          graph.GraphSpec(0.03, bounds))
+  if window is None:
+    window = rollouts.mpm_window(placement.scene, C)
+  sim = rollouts.GNSRollout.create(placement, model, problem, window,
+                                   num_frames)
+  return rollouts.GNSDriver(sim, params)
