@@ -73,9 +73,16 @@ class Rollout(NamedTuple):
 def unroll(predictor, params, window: jax.Array, types: jax.Array,
            moving: jax.Array, solids: geometry.SDFGrid, nbrs,
            context: simulator.Context, spec: graph.GraphSpec, length: int,
-           project: bool = True, batched: bool = False):
+           project: bool = True, batched: bool = False, remat: bool = False,
+           update_graph: bool = True):
   """``length`` learned steps from ``window`` (pure; jit it with
-  ``predictor``, ``spec``, ``length``, ``project`` and ``batched`` static).
+  ``predictor``, ``spec``, ``length``, ``project``, ``batched``, ``remat``
+  and ``update_graph`` static).
+
+  Differentiable in ``params``, ``window`` and ``solids`` (inverse design);
+  the edges are integers, so no gradient flows through the neighbour search.
+  The result is piecewise smooth: an edge appears, with a message of full
+  size, when two nodes come closer than R.
 
   Args:
     predictor, params: the simulator (``simulator.ModelPredictor``).
@@ -87,6 +94,11 @@ def unroll(predictor, params, window: jax.Array, types: jax.Array,
     length: L steps.
     project: keep sand out of solids (``simulator.constrain``).
     batched: whether the scene axis B is there.
+    remat: rematerialise each step in the backward pass (memory grows with
+      the carried state per step, not with the activations).
+    update_graph: rebuild the edges every step; without, the edges of
+      ``nbrs`` are kept throughout (a smooth function, for checking
+      gradients against finite differences).
 
   Returns:
     (positions [L, (B,) N, 2], carried [L, (B,) N, 2] the last input frame
@@ -110,11 +122,14 @@ def unroll(predictor, params, window: jax.Array, types: jax.Array,
 
   def body(carry, _):
     w, nb = carry
-    nb = update(w[-1], nb)
+    if update_graph:
+      nb = update(jax.lax.stop_gradient(w[-1]), nb)
     nxt, last, info = advance(w, nb, types, moving, solids)
     w = jnp.concatenate([w[1:-1], last[None], nxt[None]], 0)
     return (w, nb), (nxt, last, jnp.any(nb.did_buffer_overflow), info)
 
+  if remat:
+    body = jax.checkpoint(body)
   (_, nbrs), (positions, carried, overflow, info) = jax.lax.scan(
       body, (window, nbrs), None, length=length)
   return positions, carried, overflow, nbrs, info

@@ -39,6 +39,7 @@ import numpy as np
 
 import mpm
 from gnsjax import graph
+from gnsjax import rollout as rollout_lib
 from gnsjax import simulator
 from gnsjax.design import placement as placement_lib
 from mpm import boundary
@@ -52,28 +53,33 @@ Objective = Callable[[jax.Array], jax.Array]
 # ------------------------------------------------------------------- GNS ---
 
 
-def mpm_window(scene: mpm.Scene, input_frames: int) -> np.ndarray:
-  """The first C frames of ``scene`` by the MPM: float32 [C, Ns, 2] (m).
+def mpm_window(scene: mpm.Scene, input_frames: int,
+               frame_stride: int = 1) -> np.ndarray:
+  """The MPM's frames 0, k, ..., (C - 1) k of ``scene``: float32 [C, Ns, 2]
+  (m), the inputs of a learned simulator of stride k.
 
-  The learned simulator needs C input frames; the obstacle does not reach
-  the sand before the avalanche is released, so one window serves every
-  placement. Runs the MPM (seconds): compute it once and pass it to
-  ``GNSRollout.create``.
+  The obstacle does not reach the sand before the avalanche is released, so
+  one window serves every placement. Runs the MPM (seconds): compute it once
+  and pass it to ``GNSRollout.create``.
   """
-  result = mpm.simulate(dataclasses.replace(scene, num_frames=input_frames))
-  return result.positions.astype(np.float32)
+  frames = (input_frames - 1) * frame_stride + 1
+  result = mpm.simulate(dataclasses.replace(scene, num_frames=frames))
+  return result.positions[::frame_stride].astype(np.float32)
 
 
 @struct.dataclass
 class GNSRollout:
   """The learned simulator as a function of the placement (a pytree).
 
-  Nodes: Ns sand, then Nr ramp particles (those under the designed obstacle
-  parked), then the other obstacles' No outline particles, then the designed
-  obstacle's P outline particles (P fixed by its initial size).
+  Nodes: Ns sand; if the model takes boundary particles, then Nr ramp
+  particles (those under the designed obstacle parked), the other
+  obstacles' No outline particles, and the designed obstacle's P outline
+  particles (P fixed by its initial size). The solids the model sees (its
+  SDF features and the solid constraint) are the scene's SDF grid at the
+  placement, so the rollout is differentiable in it either way.
 
   Attributes:
-    window: float32 [C, Ns, 2] the first C frames (m), ``mpm_window``'s.
+    window: float32 [C, Ns, 2] the input frames (m), ``mpm_window``'s.
     ramp: the ramp (traced arrays, static kind).
     ramp_points: float32 [Nr, 2] ramp particles no other obstacle covers (m).
     parking: float32 [Nr, 2] where ramp particles under the designed
@@ -85,7 +91,11 @@ class GNSRollout:
     placement: what is designed (static).
     predictor: ``simulator.ModelPredictor`` of the model (static).
     spec: the radius graph (static).
-    num_frames: T, frames returned, including the C input frames (static).
+    num_frames: stored frames the rollout covers, the C inputs included
+      (static); the learned steps are every ``frame_stride``-th of them.
+    frame_stride: stored frames per learned step (static).
+    boundary: whether boundary particles are nodes (static).
+    sdf_spacing: the SDF grid's node spacing (m) (static).
   """
   window: jax.Array
   ramp: geometry.RampParams
@@ -100,6 +110,9 @@ class GNSRollout:
   predictor: simulator.ModelPredictor = struct.field(pytree_node=False)
   spec: graph.GraphSpec = struct.field(pytree_node=False)
   num_frames: int = struct.field(pytree_node=False)
+  frame_stride: int = struct.field(pytree_node=False, default=1)
+  boundary: bool = struct.field(pytree_node=False, default=True)
+  sdf_spacing: float = struct.field(pytree_node=False, default=0.005)
 
   @classmethod
   def create(cls, placement: placement_lib.Placement, model, problem,
@@ -110,24 +123,35 @@ class GNSRollout:
     Args:
       placement: what is designed.
       model: the learned simulator (``gnsjax.models``).
-      problem: ``gnsjax.train.Problem`` (statistics, bounds, graph spec).
+      problem: ``gnsjax.train.Problem`` (statistics, bounds, graph spec,
+        stride, node choice).
       window: [C, Ns, 2] input frames (m), from ``mpm_window``.
-      num_frames: T (default the scene's); must exceed C.
+      num_frames: stored frames T (default the scene's); the rollout needs
+        at least one learned step.
     """
     scene = placement.scene
     window = np.asarray(window, np.float32)
     num_frames = num_frames or scene.num_frames
-    if num_frames <= window.shape[0]:
+    k = problem.frame_stride
+    if not len(rollout_lib.predicted_frame_indices(num_frames,
+                                                   window.shape[0], k)):
       raise ValueError(f"num_frames = {num_frames}: must exceed the "
-                       f"{window.shape[0]} input frames")
-    # What stays put is the scene's own boundary without the designed
-    # obstacle: the ramp it leaves uncovered and the other outlines.
-    fixed, fixed_types = mpm.boundary_particles(placement.fixed_scene())
-    ramp_points = fixed[fixed_types == mpm.RAMP_TYPE]
-    others = fixed[fixed_types == mpm.OBSTACLE_TYPE]
-    fractions = geometry.outline_fractions(geometry.outline_size(
-        placement.obstacle, scene.granular.spacing))
-    ns, nr, nb = window.shape[1], len(ramp_points), len(fixed) + len(fractions)
+                       f"{window.shape[0]} input frames at stride {k} "
+                       f"(frame {(window.shape[0] - 1) * k})")
+    ns = window.shape[1]
+    if problem.boundary_particles:
+      # What stays put is the scene's own boundary without the designed
+      # obstacle: the ramp it leaves uncovered and the other outlines.
+      fixed, fixed_types = mpm.boundary_particles(placement.fixed_scene())
+      ramp_points = fixed[fixed_types == mpm.RAMP_TYPE]
+      others = fixed[fixed_types == mpm.OBSTACLE_TYPE]
+      fractions = geometry.outline_fractions(geometry.outline_size(
+          placement.obstacle, scene.granular.spacing))
+    else:
+      ramp_points = others = np.zeros((0, 2), np.float32)
+      fractions = np.zeros((0,), np.float32)
+    nr, nb = len(ramp_points), len(ramp_points) + len(others) + len(
+        fractions)
     types = np.concatenate([
         np.full(ns, mpm.SAND_TYPE), np.full(nr, mpm.RAMP_TYPE),
         np.full(nb - nr, mpm.OBSTACLE_TYPE)]).astype(np.int32)
@@ -138,15 +162,24 @@ class GNSRollout:
         other_outlines=others, fractions=fractions, types=types,
         moving=np.arange(ns + nb) < ns, context=problem.context,
         placement=placement, predictor=simulator.ModelPredictor(model),
-        spec=problem.spec, num_frames=num_frames)
+        spec=problem.spec, num_frames=num_frames, frame_stride=k,
+        boundary=problem.boundary_particles, sdf_spacing=problem.sdf_spacing)
 
   @property
   def n_sand(self) -> int:
     return self.window.shape[1]
 
+  @property
+  def n_steps(self) -> int:
+    """Learned steps after the input frames."""
+    return len(rollout_lib.predicted_frame_indices(
+        self.num_frames, self.window.shape[0], self.frame_stride))
+
 
 def gns_boundary(sim: GNSRollout, params: Params) -> jax.Array:
   """Boundary node positions [Nb, 2] (m) for the placement ``params``."""
+  if not sim.boundary:
+    return jnp.zeros((0, 2), sim.window.dtype)
   nodes = geometry.boundary_nodes(
       sim.ramp, (sim.placement.obstacle_params(params),), sim.ramp_points,
       (sim.fractions,), sim.parking)
@@ -158,17 +191,24 @@ def gns_nodes(sim: GNSRollout, params: Params) -> jax.Array:
   return jnp.concatenate([sim.window[-1], gns_boundary(sim, params)])
 
 
+def gns_solids(sim: GNSRollout, params: Params) -> geometry.SDFGrid:
+  """The scene's SDF grid at the placement ``params`` (differentiable)."""
+  domain = sim.placement.scene.domain
+  return geometry.sdf_grid(sim.ramp, sim.placement.obstacles(params),
+                           domain.width, domain.height, sim.sdf_spacing)
+
+
 def gns_positions(sim: GNSRollout, params: Params, model_params, nbrs,
                   remat: bool = True, update_graph: bool = True
                   ) -> tuple[jax.Array, jax.Array]:
-  """Sand positions [T, Ns, 2] and whether the neighbour list overflowed.
+  """Sand positions [C + L, Ns, 2] and whether the neighbour list
+  overflowed; frame i > C - 1 is stored frame i k.
 
-  Pure and differentiable in ``params``. The first C frames are the
-  window's, the rest the learned simulator's. The rollout is piecewise
-  smooth in ``params``: an edge appears, with a message of full size, when
-  two nodes come closer than R. With ``update_graph=False`` the edges of
-  ``nbrs`` are kept throughout, a smooth function for checking gradients
-  against finite differences.
+  Pure and differentiable in ``params``: ``rollout.unroll`` (with the solid
+  constraint) from the window, with the boundary nodes and SDF grid of the
+  placement. With ``update_graph=False`` the edges of ``nbrs`` are kept
+  throughout, a smooth function for checking gradients against finite
+  differences.
 
   Args:
     sim: the rollout (traced arrays; static settings).
@@ -183,29 +223,12 @@ def gns_positions(sim: GNSRollout, params: Params, model_params, nbrs,
   nodes = jnp.concatenate([
       sim.window,
       jnp.broadcast_to(boundary_nodes[None], (c,) + boundary_nodes.shape)], 1)
-  n, ns = nodes.shape[1], sim.n_sand
-  # Edges are integers: no gradient flows through the neighbour search.
-  if update_graph:
-    nbrs = graph.update(sim.spec, jax.lax.stop_gradient(nodes[-1]), nbrs)
-
-  def step(carry, _):
-    window, nb = carry
-    senders, receivers = graph.edges(nb, n)
-    nxt = simulator.step(sim.predictor, model_params, window, sim.types,
-                         sim.moving, senders, receivers, sim.context,
-                         sim.spec.radius)
-    # The next step's list is built here, from the new positions: the
-    # backward pass reads it from the carry instead of searching again.
-    if update_graph:
-      nb = graph.update(sim.spec, jax.lax.stop_gradient(nxt), nb)
-    return (jnp.concatenate([window[1:], nxt[None]]), nb), nxt[:ns]
-
-  if remat:
-    step = jax.checkpoint(step)
-  (_, nbrs), predicted = jax.lax.scan(step, (nodes, nbrs), None,
-                                      length=sim.num_frames - c)
-  return (jnp.concatenate([sim.window, predicted]),
-          nbrs.did_buffer_overflow)
+  positions, _, overflow, _, _ = rollout_lib.unroll(
+      sim.predictor, model_params, nodes, sim.types, sim.moving,
+      gns_solids(sim, params), nbrs, sim.context, sim.spec, sim.n_steps,
+      project=True, remat=remat, update_graph=update_graph)
+  return (jnp.concatenate([sim.window, positions[:, :sim.n_sand]]),
+          jnp.any(overflow))
 
 
 @jax.jit

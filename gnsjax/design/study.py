@@ -19,7 +19,7 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 import mpm
-from gnsjax import evaluate
+from gnsjax import train
 from gnsjax.design import objectives
 from gnsjax.design import optimize
 from gnsjax.design import placement as placement_lib
@@ -77,12 +77,12 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
       scene, free=("x", "size") if optimise_size else ("x",))
   sims = {"mpm": rollouts.MPMDriver(rollouts.MPMRollout.create(placement))}
   if workdir is not None:
-    config, problem, trainer, state, _ = evaluate.load_run(workdir,
-                                                           scene=scene)
-    window = rollouts.mpm_window(scene, config.train.input_frames)
+    run = train.load_run(workdir)
+    window = rollouts.mpm_window(scene, run.problem.input_frames,
+                                 run.problem.frame_stride)
     sims["gns"] = rollouts.GNSDriver(
-        rollouts.GNSRollout.create(placement, trainer.model, problem, window),
-        state.params)
+        rollouts.GNSRollout.create(placement, run.model, run.problem, window),
+        run.params)
   if simulator not in sims:
     raise ValueError("simulator='gns' needs the trained model's workdir")
 
