@@ -25,7 +25,7 @@ test-all: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m pip install -q -e ".[bench]"
-	$(PY) -m experiments.benchmark --out=docs/benchmarks
+	$(PY) -m experiments.benchmarks --out=docs/benchmarks
 
 clean:
 	rm -rf $(VENV) $(OUT) .jax_cache

@@ -10,7 +10,7 @@ writes what it measured (JSON and Markdown) to a directory:
 3. throughput of vmapped batches (``mpm.simulate_setups`` on several scenes)
    against the single-scene path on the same scenes;
 4. a peer, MLS-MPM of the same scene and physics in Taichi (CPU backend,
-   ``experiments/taichi_peer.py``), timed the same way in the same run, and
+   ``experiments/benchmarks/taichi_peer.py``), timed the same way in the same run, and
    checked to be the same physics: positions after a few frames agree with
    the JAX solver's.
 
@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import mpm
-from experiments import benchlib
+from experiments.benchmarks import timing
 
 # The paper scene of the benchmark: default heap of 1000 particles.
 PAPER_SCENE = {"name": "paper_semicircle",
@@ -167,7 +167,7 @@ class _Peer:
     if not enabled:
       return
     try:
-      taichi_peer = importlib.import_module("experiments.taichi_peer")
+      taichi_peer = importlib.import_module("experiments.benchmarks.taichi_peer")
     except ImportError as e:
       self.reason = (f"taichi is not importable ({e}); install the optional "
                      "dependency with `pip install -e .[bench]`")
@@ -502,7 +502,7 @@ def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
   peer = _Peer(taichi, taichi_threads)
   if not peer.available:
     log(f"Taichi peer skipped: {peer.reason}")
-  results: dict[str, Any] = {"environment": benchlib.environment(
+  results: dict[str, Any] = {"environment": timing.environment(
       quick, taichi=peer.info if peer.available else {"skipped": peer.reason}),
                              "sizes": dataclasses.asdict(sizes)}
   paper = mpm.setup(mpm.Scene.from_dict(
@@ -517,8 +517,8 @@ def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
   markdown = to_markdown(results)
   os.makedirs(out_dir, exist_ok=True)
   stem = os.path.join(out_dir, "mpm_benchmark" + ("_quick" if quick else ""))
-  benchlib.write_atomic(stem + ".json", json.dumps(results, indent=1) + "\n")
-  benchlib.write_atomic(stem + ".md", markdown)
+  timing.write_atomic(stem + ".json", json.dumps(results, indent=1) + "\n")
+  timing.write_atomic(stem + ".md", markdown)
   results["markdown"] = markdown
   results["files"] = [stem + ".json", stem + ".md"]
   return results

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments import benchlib
+from experiments.benchmarks import timing
 from experiments import tasks
 from gnsjax import design
 from gnsjax import evaluate
@@ -108,7 +108,7 @@ def measure(name: str, sim, objective, timed_frames: int, full_frames: int,
 
 def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
                   log=print) -> dict:
-  env = benchlib.environment(quick)
+  env = timing.environment(quick)
   frames = 20 if quick else 600
   paper_gns_frames = 12 if quick else 50
   objective = objectives.make("passed_fraction", x_protect=0.4).smooth
@@ -148,9 +148,9 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
   suffix = "_quick" if quick else ""
   files = [os.path.join(out_dir, f"design_benchmark{suffix}.{e}")
            for e in ("json", "md")]
-  benchlib.write_atomic(files[0], json.dumps(results, indent=2))
+  timing.write_atomic(files[0], json.dumps(results, indent=2))
   results["markdown"] = markdown(results)
-  benchlib.write_atomic(files[1], results["markdown"])
+  timing.write_atomic(files[1], results["markdown"])
   results["files"] = files
   return results
 
@@ -159,7 +159,7 @@ def markdown(results: dict) -> str:
   env = results["environment"]
   lines = [
       "# Inverse-design benchmark", "",
-      f"`python -m experiments.benchmark --what=design`, {env['date']}, "
+      f"`python -m experiments.benchmarks --what=design`, {env['date']}, "
       f"{env['cpu_count']} CPU cores, jax {env['jax_version']} "
       f"({env['jax_backend']}), load average at start "
       f"{env['load_average_start'][0]:.2f}.", "",

@@ -20,7 +20,7 @@ import time
 from gnsjax import batching
 from gnsjax import data
 from gnsjax import graph
-from experiments import benchlib
+from experiments.benchmarks import timing
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -77,7 +77,7 @@ def run_benchmark(out_dir: str, read_data: str | None = None,
                              num_test=1 if quick else 4,
                              num_frames=20 if quick else 600,
                              spacing=0.01 if quick else 0.005)
-  env = benchlib.environment(quick)
+  env = timing.environment(quick)
   results = {"environment": env, "spec": dict(spec.__dict__),
              "generation": []}
   for workers in (2, 1):
@@ -117,8 +117,8 @@ def run_benchmark(out_dir: str, read_data: str | None = None,
               f"{r['batch_size']} windows/s."]
   results["markdown"] = "\n".join(lines) + "\n"
   name = "dataset_benchmark_quick" if quick else "dataset_benchmark"
-  benchlib.write_atomic(os.path.join(out_dir, f"{name}.json"), json.dumps(
+  timing.write_atomic(os.path.join(out_dir, f"{name}.json"), json.dumps(
       {k: v for k, v in results.items() if k != "markdown"}, indent=1))
-  benchlib.write_atomic(os.path.join(out_dir, f"{name}.md"),
+  timing.write_atomic(os.path.join(out_dir, f"{name}.md"),
                         results["markdown"])
   return results

@@ -57,9 +57,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from experiments import benchlib
-from experiments import gns_report
-from experiments import op_profile
+from experiments.benchmarks import timing
+from experiments.benchmarks import gns_report
+from experiments.benchmarks import op_profile
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import models
@@ -74,7 +74,7 @@ SAND_BLOCK_DIR = "/work/shared/bench"
 SAND_BLOCK_NPZ = "sand_block_window.npz"
 SAND_BLOCK_METADATA = "sand_block_metadata.json"
 SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
-# The paper scene of the benchmark (as in experiments/mpm_benchmark.py).
+# The paper scene of the benchmark (as in mpm_benchmark.py).
 PAPER_SCENE = {"name": "paper_semicircle",
                "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}]}
 INPUT_FRAMES = 6
@@ -639,7 +639,7 @@ def run_benchmark(out_dir: str, quick: bool = False,
     The results (the JSON's content) with the Markdown under "markdown".
   """
   sizes = QUICK if quick else FULL
-  results: dict[str, Any] = {"environment": benchlib.environment(quick),
+  results: dict[str, Any] = {"environment": timing.environment(quick),
                              "sizes": dataclasses.asdict(sizes)}
   matmul = Matmul(sizes.matmul_size)
   sand = load_sand_block(sand_block_dir)
@@ -689,9 +689,9 @@ def run_benchmark(out_dir: str, quick: bool = False,
   markdown = gns_report.to_markdown(results)
   os.makedirs(out_dir, exist_ok=True)
   stem = os.path.join(out_dir, "gns_benchmark" + ("_quick" if quick else ""))
-  benchlib.write_atomic(stem + ".json",
+  timing.write_atomic(stem + ".json",
                 json.dumps(results, indent=1, default=_json_default) + "\n")
-  benchlib.write_atomic(stem + ".md", markdown)
+  timing.write_atomic(stem + ".md", markdown)
   results["markdown"] = markdown
   results["files"] = [stem + ".json", stem + ".md"]
   return results

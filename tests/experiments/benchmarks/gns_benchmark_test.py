@@ -1,4 +1,4 @@
-"""Tests for `experiments.gns_benchmark` and `benchmark --what=gns`."""
+"""Tests for `experiments.benchmarks.gns_benchmark` and `--what=gns`."""
 
 import json
 import os
@@ -12,9 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments import benchmark
-from experiments import gns_benchmark
-from experiments import op_profile
+from experiments.benchmarks import __main__ as benchmarks_main
+from experiments.benchmarks import gns_benchmark
+from experiments.benchmarks import op_profile
 from gnsjax import models
 
 FLAGS = flags.FLAGS
@@ -112,7 +112,7 @@ class GnsBenchmarkQuickTest(absltest.TestCase):
       FLAGS.mark_as_parsed()
     out = self.create_tempdir().full_path
     with flagsaver.flagsaver(out=out, quick=True, what=["gns"]):
-      benchmark.main(["benchmark"])
+      benchmarks_main.main(["benchmarks"])
 
     self.assertFalse(os.path.exists(os.path.join(out,
                                                  "mpm_benchmark_quick.json")))

@@ -1,12 +1,12 @@
 """Targets and the Markdown report of the GNS benchmark.
 
 The peers' quoted times and the targets the issue sets are kept here with the
-report that judges against them; ``experiments/gns_benchmark.py`` measures.
+report that judges against them; ``experiments/benchmarks/gns_benchmark.py`` measures.
 """
 
 from typing import Any
 
-from experiments import op_profile
+from experiments.benchmarks import op_profile
 
 # Quoted from /work/shared/bench/README.md: measured on this machine's kind (2
 # CPU threads), latent 128, 10 message-passing steps, MLPs with two hidden
@@ -203,7 +203,8 @@ def to_markdown(results: dict[str, Any]) -> str:
       f"## Where the time goes ({s['model']['config']} model, "
       f"{s['scene']})", "",
       "Operation time under `jax.profiler`, summed by kind over the "
-      "optimised HLO's operations (`experiments/op_profile.py`): dense = "
+      "optimised HLO's operations "
+      "(`experiments/benchmarks/op_profile.py`): dense = "
       "dots with their fused bias/activation; gather = gathers and the "
       "elementwise work fused with them; scatter = segment sums and "
       "gathers' transposes; reduce = LayerNorm statistics, bias gradients; "

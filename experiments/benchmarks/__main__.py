@@ -1,28 +1,28 @@
-"""Benchmarks the MPM solver and the GNS: ``python -m experiments.benchmark``.
+"""Benchmarks the MPM solver and the GNS: ``python -m experiments.benchmarks``.
 
 ``--what=mpm,gns`` (default both) picks the benchmarks; each writes JSON and
 Markdown to ``--out`` (``*_quick.*`` with ``--quick``) and prints its tables.
 
-mpm (``experiments/mpm_benchmark.py``): microseconds per substep and seconds
+mpm (``experiments/benchmarks/mpm_benchmark.py``): microseconds per substep and seconds
 per 600-frame trajectory of the paper scene, cost against particle and
 obstacle count, vmapped batch throughput, and a Taichi (CPU) peer of the same
 physics, timed in the same run and checked against the JAX solver. Writes
 ``mpm_benchmark.json`` and ``mpm_benchmark.md``. The peer needs the optional
 dependency: ``pip install -e .[bench]``.
 
-gns (``experiments/gns_benchmark.py``): forward and training step of the
+gns (``experiments/benchmarks/gns_benchmark.py``): forward and training step of the
 paper and small models on the shared sand block window and on the paper
 scene, against the quoted geoelements/gns and LagrangeBench times, the
 achieved FLOP rate against this machine's matmul rate, and the split first
 edge layer against the concatenated form. Writes ``gns_benchmark.json`` and
 ``gns_benchmark.md``.
 
-dataset (``experiments/dataset_benchmark.py``): wall time to generate 20 paper
+dataset (``experiments/benchmarks/dataset_benchmark.py``): wall time to generate 20 paper
 trajectories with 2 and 1 worker processes, extrapolated to the paper's 1100,
 and windows and padded batches read per second from ``--read_data``. Writes
 ``dataset_benchmark.json`` and ``dataset_benchmark.md``.
 
-design (``experiments/design_benchmark.py``): the gradient of an objective
+design (``experiments/benchmarks/design_benchmark.py``): the gradient of an objective
 w.r.t. an obstacle's x against the forward rollout, for MPM and GNS, time
 ratio and XLA memory. Writes ``design_benchmark.json`` and
 ``design_benchmark.md``.
@@ -32,10 +32,10 @@ from absl import app
 from absl import flags
 from absl import logging
 
-from experiments import dataset_benchmark
-from experiments import design_benchmark
-from experiments import gns_benchmark
-from experiments import mpm_benchmark
+from experiments.benchmarks import dataset_benchmark
+from experiments.benchmarks import design_benchmark
+from experiments.benchmarks import gns_benchmark
+from experiments.benchmarks import mpm_benchmark
 from experiments import runtime
 
 _BENCHMARKS = ("mpm", "gns", "dataset", "design")
