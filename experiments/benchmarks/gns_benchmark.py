@@ -36,8 +36,8 @@ writes what it measured (JSON and Markdown) to a directory:
    forms) under ``jax.profiler``, operation time summed by kind (dense
    layers, gathers, scatters, reductions, elementwise; ``op_profile``).
 
-Timing rules (DESIGN.md, "Honest timing"): compilation (timed separately) and
-a warm-up call are excluded; every call is waited on with
+Timing follows ``timing``'s rules: compilation (timed separately) and a
+warm-up call are excluded; every call is waited on with
 ``jax.block_until_ready``; each figure is the median of repeats with the
 minimum beside it. Calls measured together (forward, training step and the
 matmul; split and concatenated forms) are interleaved, one call of each per
@@ -49,7 +49,6 @@ import importlib
 import json
 import os
 import statistics
-import time
 from typing import Any, Callable, Sequence
 
 import jax
@@ -117,42 +116,6 @@ QUICK = Sizes(models=("test",), split_model="test", repeats=2,
 # ---------------------------------------------------------------- timing ---
 
 
-def _summary(seconds: Sequence[float]) -> dict[str, Any]:
-  """Median and minimum of repeated timings (s)."""
-  return {"median_s": statistics.median(seconds), "min_s": min(seconds),
-          "repeats": len(seconds), "all_s": list(seconds)}
-
-
-def time_calls(calls: dict[str, Callable[[], Any]],
-               repeats: int) -> dict[str, dict[str, Any]]:
-  """Seconds per call of each zero-argument function, interleaved.
-
-  Each function is called once to warm up, then the functions take turns,
-  ``repeats`` rounds, so that load from other processes falls on all of them
-  alike. The clock stops after ``jax.block_until_ready`` of the result.
-  """
-  for call in calls.values():
-    jax.block_until_ready(call())
-  seconds = {name: [] for name in calls}
-  for _ in range(repeats):
-    for name, call in calls.items():
-      start = time.perf_counter()
-      jax.block_until_ready(call())
-      seconds[name].append(time.perf_counter() - start)
-  return {name: _summary(s) for name, s in seconds.items()}
-
-
-def _compile(fn, *args):
-  """(compiled executable, compile seconds, XLA flop count) of a jitted fn."""
-  start = time.perf_counter()
-  compiled = fn.lower(*args).compile()
-  compile_s = time.perf_counter() - start
-  cost = compiled.cost_analysis()
-  cost = cost[0] if isinstance(cost, (list, tuple)) else cost
-  flops = float(cost["flops"]) if cost and "flops" in cost else None
-  return compiled, compile_s, flops
-
-
 class Matmul:
   """A jitted float32 ``size x size`` matmul of random matrices, the
   machine's reference rate; every timing group runs it beside its own
@@ -164,14 +127,15 @@ class Matmul:
     self.flops = 2.0 * size**3
     self._args = (jax.random.normal(ka, (size, size), jnp.float32),
                   jax.random.normal(kb, (size, size), jnp.float32))
-    self._compiled, _, _ = _compile(jax.jit(jnp.matmul), *self._args)
+    self._compiled = timing.compile_program(jax.jit(jnp.matmul), *self._args)
     self.samples: list[float] = []
 
   def __call__(self):
     return self._compiled(*self._args)
 
   def rate(self, timing: dict[str, Any]) -> dict[str, Any]:
-    """GFLOP/s of a ``time_calls`` summary of this matmul (recorded)."""
+    """GFLOP/s of a ``timing.time_calls`` summary of this matmul
+    (recorded)."""
     rates = [self.flops / s / 1e9 for s in timing["all_s"]]
     self.samples += rates
     return {"median_gflops": statistics.median(rates),
@@ -407,8 +371,10 @@ class _Runner:
     self.n_edges_computed = int(s.shape[0])
 
   def compile_forward(self):
-    self.fwd, self.fwd_compile_s, self.fwd_xla_flops = _compile(
+    self.fwd = timing.compile_program(
         forward_fn(self.model, self.graph.radius), *self.fwd_args)
+    self.fwd_compile_s, self.fwd_xla_flops = (self.fwd.compile_s,
+                                              self.fwd.flops)
 
   def forward(self):
     return self.fwd(*self.fwd_args)
@@ -419,9 +385,11 @@ class _Runner:
     self.train_args = (inputs, jnp.asarray(g.positions[INPUT_FRAMES]), types,
                        jnp.asarray(g.moving), s, r, ctx)
     self.state = self._fresh_state()
-    self.step, self.train_compile_s, self.train_xla_flops = _compile(
+    self.step = timing.compile_program(
         train_step_fn(self.model, self.tx, g.radius), self.state,
         *self.train_args)
+    self.train_compile_s, self.train_xla_flops = (self.step.compile_s,
+                                                  self.step.flops)
 
   def _fresh_state(self):
     params = jax.tree.map(jnp.array, self.params)  # a copy: state is donated
@@ -494,7 +462,7 @@ def measure_model(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
     row["compile_s"]["train_step"] = runner.train_compile_s
     calls["train_step"] = runner.train_step
   calls["matmul"] = matmul
-  times = time_calls(calls, sizes.repeats)
+  times = timing.time_calls(calls, sizes.repeats)
   row["forward"] = times["forward"]
   row["matmul"] = matmul.rate(times["matmul"])
   label = (f"{name} model on {g.name} ({g.n_nodes} nodes, "
@@ -544,7 +512,7 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
   out = {"model": _model_info(name, config), "scene": g.name,
          "n_nodes": g.n_nodes, "n_edges": g.n_edges,
          "max_abs_output_diff": diff}
-  times = time_calls({"split_forward": split.forward,
+  times = timing.time_calls({"split_forward": split.forward,
                       "concat_forward": concat.forward,
                       "split_train_step": split.train_step,
                       "concat_train_step": concat.train_step,
@@ -598,9 +566,9 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
   out["profile"] = {}
   for key, runner in (("split", split), ("concat", concat)):
     for program, compiled, call, flops in (
-        ("forward", runner.fwd, runner.forward,
+        ("forward", runner.fwd.executable, runner.forward,
          runner.dense_flops()["total"]),
-        ("train_step", runner.step, runner.train_step, None)):
+        ("train_step", runner.step.executable, runner.train_step, None)):
       p = op_profile.breakdown(compiled, call, sizes.profile_repeats)
       out["profile"][f"{key}_{program}"] = p
       if "skipped" in p:
@@ -614,14 +582,6 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
           + (f"; dense layers run at {p['dense_gflops']:.1f} GFLOP/s"
              if flops else ""))
   return out
-
-
-def _json_default(v):
-  if isinstance(v, (np.floating, np.integer, np.bool_)):
-    return v.item()
-  if isinstance(v, np.ndarray):
-    return v.tolist()
-  raise TypeError(f"not JSON serialisable: {type(v)}")
 
 
 def run_benchmark(out_dir: str, quick: bool = False,
@@ -684,14 +644,7 @@ def run_benchmark(out_dir: str, quick: bool = False,
   log(f"matmul rate of this run: {results['matmul']['median_gflops']:.1f} "
       f"GFLOP/s (median of {results['matmul']['samples']} jitted "
       f"{sizes.matmul_size}^2 float32 matmuls, interleaved with the above)")
-  results["environment"]["load_average_end"] = list(os.getloadavg())
-
-  markdown = gns_report.to_markdown(results)
-  os.makedirs(out_dir, exist_ok=True)
-  stem = os.path.join(out_dir, "gns_benchmark" + ("_quick" if quick else ""))
-  timing.write_atomic(stem + ".json",
-                json.dumps(results, indent=1, default=_json_default) + "\n")
-  timing.write_atomic(stem + ".md", markdown)
-  results["markdown"] = markdown
-  results["files"] = [stem + ".json", stem + ".md"]
+  timing.end_environment(results["environment"])
+  timing.write_results(out_dir, "gns_benchmark", quick, results,
+                       gns_report.to_markdown(results))
   return results

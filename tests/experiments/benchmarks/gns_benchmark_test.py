@@ -24,20 +24,6 @@ HAS_SAND_BLOCK = os.path.exists(os.path.join(
 
 class HelpersTest(absltest.TestCase):
 
-  def test_time_calls_runs_each_call_warm_up_plus_repeats(self):
-    counts = {"a": 0, "b": 0}
-
-    def call(name):
-      counts[name] += 1
-      return jnp.zeros(())
-
-    out = gns_benchmark.time_calls(
-        {k: (lambda k=k: call(k)) for k in counts}, repeats=3)
-    self.assertEqual(counts, {"a": 4, "b": 4})
-    for summary in out.values():
-      self.assertEqual(summary["repeats"], 3)
-      self.assertLessEqual(summary["min_s"], summary["median_s"])
-
   def test_dense_flops_are_the_bulk_of_xla_count(self):
     n, e = 200, 2000
     rng = np.random.default_rng(0)
