@@ -56,6 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from experiments.benchmarks import scenes
 from experiments.benchmarks import timing
 from experiments.benchmarks import gns_report
 from experiments.benchmarks import op_profile
@@ -73,9 +74,6 @@ SAND_BLOCK_DIR = "/work/shared/bench"
 SAND_BLOCK_NPZ = "sand_block_window.npz"
 SAND_BLOCK_METADATA = "sand_block_metadata.json"
 SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
-# The paper scene of the benchmark (as in mpm_benchmark.py).
-PAPER_SCENE = {"name": "paper_semicircle",
-               "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}]}
 INPUT_FRAMES = 6
 
 
@@ -249,7 +247,7 @@ def load_sand_block(directory: str = SAND_BLOCK_DIR) -> BenchGraph:
 def make_paper_scene(sizes: Sizes, radius: float = 0.015) -> BenchGraph:
   """Frames ``window_start``.. of the simulated paper scene, with all of its
   boundary particles as static nodes (``rollout.trajectory_nodes``)."""
-  scene = mpm.Scene.from_dict({**PAPER_SCENE,
+  scene = mpm.Scene.from_dict({**scenes.PAPER_SCENE,
                                "num_frames": sizes.scene_frames})
   result = mpm.simulate(scene)
   t0 = sizes.window_start

@@ -35,11 +35,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import mpm
+from experiments.benchmarks import scenes
 from experiments.benchmarks import timing
 
-# The paper scene of the benchmark: default heap of 1000 particles.
-PAPER_SCENE = {"name": "paper_semicircle",
-               "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}]}
 # A granular box large enough for 5000 particles at 0.005 m spacing (the
 # default box holds ~3300 above the ramp); used for every row of the particle
 # sweep so that only the particle count changes.
@@ -483,7 +481,7 @@ def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
       quick, taichi=peer.info if peer.available else {"skipped": peer.reason}),
                              "sizes": dataclasses.asdict(sizes)}
   paper = mpm.setup(mpm.Scene.from_dict(
-      {**PAPER_SCENE, "num_frames": sizes.trajectory_frames}))
+      {**scenes.PAPER_SCENE, "num_frames": sizes.trajectory_frames}))
   results["paper_scene"] = measure_paper_scene(paper, sizes, peer, log)
   results["agreement"] = measure_agreement(paper, sizes, peer, log)
   results["particle_scaling"] = measure_particle_scaling(sizes, peer, log)
