@@ -1,95 +1,122 @@
-"""Benchmarks the MPM solver and the GNS: ``python -m experiments.benchmarks``.
+"""Runs the benchmarks: ``python -m experiments.benchmarks --what=...``.
 
-``--what=mpm,gns`` (default both) picks the benchmarks; each writes JSON and
-Markdown to ``--out`` (``*_quick.*`` with ``--quick``) and prints its tables.
+  python -m experiments.benchmarks --what=mpm --out=docs/benchmarks
+  python -m experiments.benchmarks --what=gns --out=docs/benchmarks \\
+      --sand_block_dir=DIR
+  python -m experiments.benchmarks --what=dataset --out=docs/benchmarks \\
+      --read_data=data/small
+  python -m experiments.benchmarks --what=design --out=docs/benchmarks
+  python -m experiments.benchmarks --what=mpm,gns --quick ...   # smoke test
 
-mpm (``experiments/benchmarks/mpm_benchmark.py``): microseconds per substep and seconds
-per 600-frame trajectory of the paper scene, cost against particle and
-obstacle count, vmapped batch throughput, and a Taichi (CPU) peer of the same
-physics, timed in the same run and checked against the JAX solver. Writes
-``mpm_benchmark.json`` and ``mpm_benchmark.md``. The peer needs the optional
-dependency: ``pip install -e .[bench]``.
-
-gns (``experiments/benchmarks/gns_benchmark.py``): forward and training step of the
-paper and small models on the shared sand block window and on the paper
-scene, against the quoted geoelements/gns and LagrangeBench times, the
-achieved FLOP rate against this machine's matmul rate, and the split first
-edge layer against the concatenated form. Writes ``gns_benchmark.json`` and
-``gns_benchmark.md``.
-
-dataset (``experiments/benchmarks/dataset_benchmark.py``): wall time to generate 20 paper
-trajectories with 2 and 1 worker processes, extrapolated to the paper's 1100,
-and windows and padded batches read per second from ``--read_data``. Writes
-``dataset_benchmark.json`` and ``dataset_benchmark.md``.
-
-design (``experiments/benchmarks/design_benchmark.py``): the gradient of an objective
-w.r.t. an obstacle's x against the forward rollout, for MPM and GNS, time
-ratio and XLA memory. Writes ``design_benchmark.json`` and
-``design_benchmark.md``.
+``--what`` (comma-separated; default mpm,gns) picks the benchmarks; each
+writes ``<name>_benchmark.json`` and ``.md`` to ``--out`` (``*_quick.*``
+with ``--quick``, tiny sizes that are not figures) and prints its tables.
+What each measures is in the package docstring (``__init__.py``). The gns
+benchmark needs the shared sand block window, which is not part of the
+repository: ``--sand_block_dir``.
 """
+
+import os
 
 from absl import app
 from absl import flags
 from absl import logging
 
+from experiments import runtime
 from experiments.benchmarks import dataset_benchmark
 from experiments.benchmarks import design_benchmark
 from experiments.benchmarks import gns_benchmark
 from experiments.benchmarks import mpm_benchmark
-from experiments import runtime
 
-_BENCHMARKS = ("mpm", "gns", "dataset", "design")
+BENCHMARKS = ("mpm", "gns", "dataset", "design")
 
 _OUT = flags.DEFINE_string("out", "docs/benchmarks",
                            "Directory for the JSON and Markdown results.")
 _WHAT = flags.DEFINE_list("what", ["mpm", "gns"],
-                          "Benchmarks to run, comma-separated: mpm, gns, "
-                          "dataset, design.")
+                          "Benchmarks to run, comma-separated subset of "
+                          f"{', '.join(BENCHMARKS)}.")
 _QUICK = flags.DEFINE_bool("quick", False,
                            "Tiny sizes (seconds): a smoke test, not figures.")
 _TAICHI = flags.DEFINE_bool("taichi", True,
                             "mpm: run the Taichi peer (skipped if not "
                             "installed).")
 _TAICHI_THREADS = flags.DEFINE_integer(
-    "taichi_threads", 0, "mpm: CPU threads for Taichi; 0: all cores.")
+    "taichi_threads", 0, "mpm: CPU threads for Taichi; 0: all cores.",
+    lower_bound=0)
 _SAND_BLOCK_DIR = flags.DEFINE_string(
-    "sand_block_dir", gns_benchmark.SAND_BLOCK_DIR,
-    "gns: directory of sand_block_window.npz and sand_block_metadata.json.")
-
+    "sand_block_dir", None,
+    "gns (required): directory of the shared sand block window, "
+    f"{gns_benchmark.SAND_BLOCK_NPZ} and {gns_benchmark.SAND_BLOCK_METADATA} "
+    f"(and the {gns_benchmark.SAND_BLOCK_README} quoting the peers' times).")
 _READ_DATA = flags.DEFINE_string(
     "read_data", None, "dataset: a dataset directory to time reading on.")
 
-flags.register_validator(
-    "what", lambda v: bool(v) and set(v) <= set(_BENCHMARKS),
-    message=f"--what takes a comma-separated subset of {list(_BENCHMARKS)}")
+
+def _check_what(value: list[str]) -> bool:
+  unknown = [v for v in value if v not in BENCHMARKS]
+  if not value or unknown:
+    raise flags.ValidationError(
+        f"--what={','.join(value)}: unknown {unknown or 'empty'}; allowed: "
+        f"a comma-separated subset of {list(BENCHMARKS)}")
+  return True
+
+
+flags.register_validator("what", _check_what)
+
+
+def check_inputs(what: list[str]) -> None:
+  """Fails before any timing if a chosen benchmark lacks its input.
+
+  Raises:
+    app.UsageError: naming the flag, its value and what it needs.
+  """
+  if "gns" in what:
+    if not _SAND_BLOCK_DIR.value:
+      raise app.UsageError(
+          "--sand_block_dir is required with --what=gns: the directory of "
+          f"{gns_benchmark.SAND_BLOCK_NPZ} and "
+          f"{gns_benchmark.SAND_BLOCK_METADATA} (the shared sand block "
+          "window, not part of the repository); or leave gns out of --what")
+    try:
+      gns_benchmark.sand_block_files(_SAND_BLOCK_DIR.value)
+    except FileNotFoundError as e:
+      raise app.UsageError(f"--sand_block_dir={_SAND_BLOCK_DIR.value}: "
+                           f"{e}") from e
+  if _READ_DATA.value is not None:
+    if "dataset" not in what:
+      raise app.UsageError(f"--read_data={_READ_DATA.value}: only used by "
+                           f"--what=dataset (got --what={','.join(what)})")
+    if not os.path.isdir(_READ_DATA.value):
+      raise app.UsageError(f"--read_data={_READ_DATA.value}: not a "
+                           "directory (a dataset written by "
+                           "experiments.generate_dataset)")
 
 
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f"unexpected arguments: {argv[1:]}")
   what = _WHAT.value
-  if "mpm" in what:
-    results = mpm_benchmark.run_benchmark(
-        _OUT.value, quick=_QUICK.value, taichi=_TAICHI.value,
-        taichi_threads=_TAICHI_THREADS.value or None, log=logging.info)
-    print(results["markdown"])
-    print("Wrote " + ", ".join(results["files"]))
-  if "gns" in what:
-    results = gns_benchmark.run_benchmark(
-        _OUT.value, quick=_QUICK.value, log=logging.info,
-        sand_block_dir=_SAND_BLOCK_DIR.value)
-    print(results["markdown"])
-    print("Wrote " + ", ".join(results["files"]))
-  if "dataset" in what:
-    results = dataset_benchmark.run_benchmark(
-        _OUT.value, read_data=_READ_DATA.value, quick=_QUICK.value,
-        cache=runtime.enable_compilation_cache(), log=logging.info)
-    print(results["markdown"])
-  if "design" in what:
-    results = design_benchmark.run_benchmark(_OUT.value, quick=_QUICK.value,
-                                             log=logging.info)
-    print(results["markdown"])
-    print("Wrote " + ", ".join(results["files"]))
+  check_inputs(what)
+  out, quick = _OUT.value, _QUICK.value
+  runs = {
+      "mpm": lambda: mpm_benchmark.run_benchmark(
+          out, quick=quick, taichi=_TAICHI.value,
+          taichi_threads=_TAICHI_THREADS.value or None, log=logging.info),
+      "gns": lambda: gns_benchmark.run_benchmark(
+          out, _SAND_BLOCK_DIR.value, quick=quick, log=logging.info),
+      # The dataset's workers are processes: they share compiled programs
+      # only through the on-disk cache.
+      "dataset": lambda: dataset_benchmark.run_benchmark(
+          out, read_data=_READ_DATA.value, quick=quick,
+          cache=runtime.enable_compilation_cache(), log=logging.info),
+      "design": lambda: design_benchmark.run_benchmark(
+          out, quick=quick, log=logging.info),
+  }
+  for name in BENCHMARKS:
+    if name in what:
+      results = runs[name]()
+      print(results["markdown"])
+      print("Wrote " + ", ".join(results["files"]))
 
 
 if __name__ == "__main__":

@@ -10,9 +10,10 @@ writes what it measured (JSON and Markdown) to a directory:
    (``configs/paper.py``) and the small model (``configs/small.py``), at batch
    1, on two graphs:
 
-   * ``sand_block``: the shared window (``/work/shared/bench``), 1000 sand
-     particles, the graph public GNS implementations were timed on (24,930
-     directed edges at R = 0.015 m, self-pairs included; checked);
+   * ``sand_block``: the shared sand block window (``--sand_block_dir``,
+     kept outside the repository), 1000 sand particles, the graph public GNS
+     implementations were timed on (24,930 directed edges at R = 0.015 m,
+     self-pairs included; checked);
    * ``paper_scene``: frames 50-56 of the paper scene (one semicircle)
      simulated with ``mpm.simulate``, with all of its boundary (ramp and
      obstacle) particles as static nodes, as a rollout assembles them
@@ -23,7 +24,8 @@ writes what it measured (JSON and Markdown) to a directory:
    and LagrangeBench were timed) and holds exactly the graph's edges, no
    capacity padding; one more row times the paper model on the neighbour
    list's padded capacity, as rollouts run it.
-2. peers, quoted from ``/work/shared/bench/README.md`` (not re-run):
+2. peers, quoted in ``gns_report.PEERS`` from the window's README (not
+   re-run; the README, where present, is checked to still quote them):
    geoelements/gns and LagrangeBench on the sand block; ours as a ratio.
 3. this machine's matmul rate in the same run (jitted 2048x2048 float32
    matmuls, interleaved with every measurement above) and the model's
@@ -69,10 +71,11 @@ from gnsjax import train
 import mpm
 from mpm import io as mpm_io
 
-# The shared benchmark input (README.md there).
-SAND_BLOCK_DIR = "/work/shared/bench"
+# The shared benchmark input: a directory (--sand_block_dir) holding these
+# two files and the README that quotes the peers' times.
 SAND_BLOCK_NPZ = "sand_block_window.npz"
 SAND_BLOCK_METADATA = "sand_block_metadata.json"
+SAND_BLOCK_README = "README.md"
 SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
 INPUT_FRAMES = 6
 
@@ -204,19 +207,34 @@ def _radius_graph(last: np.ndarray, bounds: np.ndarray, radius: float):
   return senders[real], receivers[real], senders, receivers
 
 
-def load_sand_block(directory: str = SAND_BLOCK_DIR) -> BenchGraph:
+def sand_block_files(directory: str) -> list[str]:
+  """The input files of the sand block window in ``directory``.
+
+  Raises:
+    FileNotFoundError: a missing input file (named).
+  """
+  paths = [os.path.join(directory, f) for f in (SAND_BLOCK_NPZ,
+                                                 SAND_BLOCK_METADATA)]
+  for path in paths:
+    if not os.path.exists(path):
+      raise FileNotFoundError(f"{path}: missing benchmark input (the shared "
+                              "sand block window; see --sand_block_dir)")
+  return paths
+
+
+def load_sand_block(directory: str) -> BenchGraph:
   """The shared sand block window, its metadata and graph.
+
+  Args:
+    directory: holds ``sand_block_window.npz`` (positions float32
+      [C + 1, N, 2] in m, particle_type int32 [N]) and
+      ``sand_block_metadata.json`` (bounds, radius, statistics).
 
   Raises:
     FileNotFoundError: a missing input file (named).
     RuntimeError: the graph does not have the 24,930 edges the peers had.
   """
-  npz = os.path.join(directory, SAND_BLOCK_NPZ)
-  meta_path = os.path.join(directory, SAND_BLOCK_METADATA)
-  for path in (npz, meta_path):
-    if not os.path.exists(path):
-      raise FileNotFoundError(f"{path}: missing benchmark input (the shared "
-                              "sand block window; see --sand_block_dir)")
+  npz, meta_path = sand_block_files(directory)
   with np.load(npz) as d:
     positions = np.asarray(d["positions"], np.float32)
     types = np.asarray(d["particle_type"], np.int32)
@@ -582,25 +600,32 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
   return out
 
 
-def run_benchmark(out_dir: str, quick: bool = False,
-                  log: Callable[[str], None] = print,
-                  sand_block_dir: str = SAND_BLOCK_DIR) -> dict[str, Any]:
+def run_benchmark(out_dir: str, sand_block_dir: str, quick: bool = False,
+                  log: Callable[[str], None] = print) -> dict[str, Any]:
   """Runs every measurement and writes ``gns_benchmark[_quick].{json,md}``.
 
   Args:
     out_dir: directory for the results (created if missing).
     quick: tiny sizes (``QUICK``), seconds instead of minutes.
     log: called with one line per measurement.
-    sand_block_dir: directory of the shared sand block window.
+    sand_block_dir: directory of the shared sand block window
+      (``load_sand_block``) and of the README quoting the peers.
 
   Returns:
     The results (the JSON's content) with the Markdown under "markdown".
+
+  Raises:
+    FileNotFoundError: a missing input file (named).
+    ValueError: the README no longer quotes ``gns_report.PEERS``' times.
   """
   sizes = QUICK if quick else FULL
+  # Inputs first: a bad directory fails now, not after minutes of timing.
+  readme = os.path.join(sand_block_dir, SAND_BLOCK_README)
+  quotes = gns_report.check_quotes(readme)
+  sand = load_sand_block(sand_block_dir)
   results: dict[str, Any] = {"environment": timing.environment(quick),
                              "sizes": dataclasses.asdict(sizes)}
   matmul = Matmul(sizes.matmul_size)
-  sand = load_sand_block(sand_block_dir)
   log(f"sand block: {sand.n_nodes} particles, {sand.n_edges} edges at R = "
       f"{sand.radius} (checked: {SAND_BLOCK_EDGES})")
   scene = make_paper_scene(sizes)
@@ -625,12 +650,12 @@ def run_benchmark(out_dir: str, quick: bool = False,
                 r["scene"] == "sand_block" and not r["padded"]]
   if paper_rows:
     row = paper_rows[0]
-    results["peers"] = gns_report.compare_peers(
-        row, os.path.join(SAND_BLOCK_DIR, "README.md"))
+    results["peers"] = gns_report.compare_peers(row, quotes)
     results["peers"]["ours"] = {"forward_s": row["forward"]["median_s"],
                                 "train_step_s": row["train_step"]["median_s"]}
     ref = results["peers"]["peers"][gns_report.REFERENCE_PEER]
-    log(f"against {gns_report.REFERENCE_PEER} (quoted 0.54 s / 1.53 s): forward "
+    log(f"against {gns_report.REFERENCE_PEER} (quoted {ref['forward_s']} s / "
+        f"{ref['train_step_s']} s): forward "
         f"{ref['forward_ratio']:.2f}x, training step "
         f"{ref['train_step_ratio']:.2f}x their time (target <= "
         f"{gns_report.TARGET_PEER_RATIO}: forward "

@@ -13,6 +13,7 @@ import pytest
 
 from experiments.benchmarks import __main__ as benchmarks_main
 from experiments.benchmarks import mpm_benchmark
+from tests.experiments.benchmarks import fixtures
 
 FLAGS = flags.FLAGS
 HAS_TAICHI = importlib.util.find_spec("taichi") is not None
@@ -40,7 +41,7 @@ class BenchmarkQuickTest(absltest.TestCase):
   def test_quick_mode_writes_and_prints_results(self):
     if not FLAGS.is_parsed():
       FLAGS.mark_as_parsed()
-    out = self.create_tempdir().full_path
+    out = fixtures.tempdir(self)
     with flagsaver.flagsaver(out=out, quick=True, taichi=HAS_TAICHI,
                              what=["mpm"]):
       benchmarks_main.main(["benchmarks"])

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.benchmarks import timing
+from tests.experiments.benchmarks import fixtures
 
 
 class TimeCallsTest(absltest.TestCase):
@@ -74,7 +75,7 @@ class RecordTest(absltest.TestCase):
     self.assertLen(env["load_average_end"], 3)
 
   def test_write_results_names_quick_files_and_keeps_json_clean(self):
-    out = os.path.join(self.create_tempdir().full_path, "new")
+    out = os.path.join(fixtures.tempdir(self), "new")
     results = {"value": np.float32(1.5), "n": np.int64(2),
                "array": np.arange(2)}
     files = timing.write_results(out, "x_benchmark", True, results, "# x\n")
