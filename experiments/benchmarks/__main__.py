@@ -26,6 +26,7 @@ from experiments import runtime
 from experiments.benchmarks import dataset_benchmark
 from experiments.benchmarks import design_benchmark
 from experiments.benchmarks import gns_benchmark
+from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import mpm_benchmark
 
 BENCHMARKS = ("mpm", "gns", "dataset", "design")
@@ -46,8 +47,8 @@ _TAICHI_THREADS = flags.DEFINE_integer(
 _SAND_BLOCK_DIR = flags.DEFINE_string(
     "sand_block_dir", None,
     "gns (required): directory of the shared sand block window, "
-    f"{gns_benchmark.SAND_BLOCK_NPZ} and {gns_benchmark.SAND_BLOCK_METADATA} "
-    f"(and the {gns_benchmark.SAND_BLOCK_README} quoting the peers' times).")
+    f"{gns_inputs.SAND_BLOCK_NPZ} and {gns_inputs.SAND_BLOCK_METADATA} "
+    f"(and the {gns_inputs.SAND_BLOCK_README} quoting the peers' times).")
 _READ_DATA = flags.DEFINE_string(
     "read_data", None, "dataset: a dataset directory to time reading on.")
 
@@ -74,11 +75,11 @@ def check_inputs(what: list[str]) -> None:
     if not _SAND_BLOCK_DIR.value:
       raise app.UsageError(
           "--sand_block_dir is required with --what=gns: the directory of "
-          f"{gns_benchmark.SAND_BLOCK_NPZ} and "
-          f"{gns_benchmark.SAND_BLOCK_METADATA} (the shared sand block "
+          f"{gns_inputs.SAND_BLOCK_NPZ} and "
+          f"{gns_inputs.SAND_BLOCK_METADATA} (the shared sand block "
           "window, not part of the repository); or leave gns out of --what")
     try:
-      gns_benchmark.sand_block_files(_SAND_BLOCK_DIR.value)
+      gns_inputs.sand_block_files(_SAND_BLOCK_DIR.value)
     except FileNotFoundError as e:
       raise app.UsageError(f"--sand_block_dir={_SAND_BLOCK_DIR.value}: "
                            f"{e}") from e

@@ -1,7 +1,12 @@
 """GNS benchmark: forward and training step, peers, FLOP rate, split layer.
 
+  python -m experiments.benchmarks --what=gns --out=docs/benchmarks \
+      --sand_block_dir=DIR
+
 One library call, :func:`run_benchmark`, measures the learned simulator and
-writes what it measured (JSON and Markdown) to a directory:
+writes what it measured (``gns_benchmark.json`` and ``.md``) to a directory.
+Its inputs are built in ``gns_inputs``, the programs it times in
+``gns_programs``, its report in ``gns_report``. It measures:
 
 1. the forward step (features + model: one call that turns a window of
    C = 6 input frames into normalised accelerations) and the training step
@@ -47,37 +52,17 @@ round, so that load from other processes falls on all of them alike.
 """
 
 import dataclasses
-import importlib
-import json
 import os
-import statistics
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
-import numpy as np
-import optax
 
-from experiments.benchmarks import scenes
-from experiments.benchmarks import timing
+from experiments.benchmarks import gns_inputs
+from experiments.benchmarks import gns_programs
 from experiments.benchmarks import gns_report
 from experiments.benchmarks import op_profile
-from gnsjax import features
-from gnsjax import graph
-from gnsjax import models
-from gnsjax import rollout as rollout_lib
-from gnsjax import simulator
-from gnsjax import train
-import mpm
-from mpm import io as mpm_io
-
-# The shared benchmark input: a directory (--sand_block_dir) holding these
-# two files and the README that quotes the peers' times.
-SAND_BLOCK_NPZ = "sand_block_window.npz"
-SAND_BLOCK_METADATA = "sand_block_metadata.json"
-SAND_BLOCK_README = "README.md"
-SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
-INPUT_FRAMES = 6
+from experiments.benchmarks import timing
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,313 +99,6 @@ QUICK = Sizes(models=("test",), split_model="test", repeats=2,
               profile_repeats=1)
 
 
-# ---------------------------------------------------------------- timing ---
-
-
-class Matmul:
-  """A jitted float32 ``size x size`` matmul of random matrices, the
-  machine's reference rate; every timing group runs it beside its own
-  calls, and ``samples`` collects each call's GFLOP/s (2 n^3 FLOPs)."""
-
-  def __init__(self, size: int):
-    ka, kb = jax.random.split(jax.random.key(0))
-    self.size = size
-    self.flops = 2.0 * size**3
-    self._args = (jax.random.normal(ka, (size, size), jnp.float32),
-                  jax.random.normal(kb, (size, size), jnp.float32))
-    self._compiled = timing.compile_program(jax.jit(jnp.matmul), *self._args)
-    self.samples: list[float] = []
-
-  def __call__(self):
-    return self._compiled(*self._args)
-
-  def rate(self, timing: dict[str, Any]) -> dict[str, Any]:
-    """GFLOP/s of a ``timing.time_calls`` summary of this matmul
-    (recorded)."""
-    rates = [self.flops / s / 1e9 for s in timing["all_s"]]
-    self.samples += rates
-    return {"median_gflops": statistics.median(rates),
-            "max_gflops": max(rates), "repeats": len(rates)}
-
-  def summary(self) -> dict[str, Any]:
-    return {"size": self.size, "flops": self.flops,
-            "median_gflops": statistics.median(self.samples),
-            "max_gflops": max(self.samples),
-            "min_gflops": min(self.samples), "samples": len(self.samples)}
-
-
-# ---------------------------------------------------------------- inputs ---
-
-
-@dataclasses.dataclass(frozen=True)
-class BenchGraph:
-  """One window and its radius graph.
-
-  Attributes:
-    name: scene name.
-    positions: float32 [C + 1, N, 2] (m): C inputs, then the target.
-    particle_type: int32 [N]; moving: bool [N].
-    stats: normalisation statistics; bounds: [2, 2] (m); radius: R (m).
-    senders, receivers: int32 [E], the graph's edges (no padding).
-    padded_senders, padded_receivers: int32 [capacity], the neighbour list's
-      edges with padding entries equal to N (as rollouts use them).
-    info: what to record about the scene.
-  """
-  name: str
-  positions: np.ndarray
-  particle_type: np.ndarray
-  moving: np.ndarray
-  stats: features.Stats
-  bounds: np.ndarray
-  radius: float
-  senders: np.ndarray
-  receivers: np.ndarray
-  padded_senders: np.ndarray
-  padded_receivers: np.ndarray
-  info: dict
-
-  @property
-  def n_nodes(self) -> int:
-    return int(self.positions.shape[1])
-
-  @property
-  def n_edges(self) -> int:
-    return int(self.senders.shape[0])
-
-  @property
-  def context(self) -> simulator.Context:
-    return simulator.Context(
-        features.Stats(*(jnp.asarray(s, jnp.float32) for s in self.stats)),
-        jnp.asarray(self.bounds, jnp.float32))
-
-
-def _radius_graph(last: np.ndarray, bounds: np.ndarray, radius: float):
-  """(senders, receivers) without and with padding, from ``gnsjax.graph``."""
-  spec = graph.GraphSpec(radius, tuple(map(tuple, np.asarray(
-      bounds, np.float64).tolist())))
-  n = last.shape[0]
-  nbrs = graph.allocate(spec, jnp.asarray(last))
-  if bool(nbrs.did_buffer_overflow):
-    raise RuntimeError("neighbour list overflowed at allocation")
-  senders, receivers = (np.asarray(a) for a in graph.edges(nbrs, n))
-  real = senders < n
-  return senders[real], receivers[real], senders, receivers
-
-
-def sand_block_files(directory: str) -> list[str]:
-  """The input files of the sand block window in ``directory``.
-
-  Raises:
-    FileNotFoundError: a missing input file (named).
-  """
-  paths = [os.path.join(directory, f) for f in (SAND_BLOCK_NPZ,
-                                                 SAND_BLOCK_METADATA)]
-  for path in paths:
-    if not os.path.exists(path):
-      raise FileNotFoundError(f"{path}: missing benchmark input (the shared "
-                              "sand block window; see --sand_block_dir)")
-  return paths
-
-
-def load_sand_block(directory: str) -> BenchGraph:
-  """The shared sand block window, its metadata and graph.
-
-  Args:
-    directory: holds ``sand_block_window.npz`` (positions float32
-      [C + 1, N, 2] in m, particle_type int32 [N]) and
-      ``sand_block_metadata.json`` (bounds, radius, statistics).
-
-  Raises:
-    FileNotFoundError: a missing input file (named).
-    RuntimeError: the graph does not have the 24,930 edges the peers had.
-  """
-  npz, meta_path = sand_block_files(directory)
-  with np.load(npz) as d:
-    positions = np.asarray(d["positions"], np.float32)
-    types = np.asarray(d["particle_type"], np.int32)
-  with open(meta_path) as f:
-    meta = json.load(f)
-  if positions.shape[0] != INPUT_FRAMES + 1:
-    raise ValueError(f"{npz}: positions {positions.shape}; want "
-                     f"[{INPUT_FRAMES + 1}, N, 2]")
-  radius = float(meta["default_connectivity_radius"])
-  bounds = np.asarray(meta["bounds"], np.float32)
-  stats = features.Stats(*(np.asarray(meta[k], np.float32) for k in
-                           ("vel_mean", "vel_std", "acc_mean", "acc_std")))
-  senders, receivers, ps, pr = _radius_graph(positions[INPUT_FRAMES - 1],
-                                             bounds, radius)
-  if len(senders) != SAND_BLOCK_EDGES:
-    raise RuntimeError(
-        f"sand block graph at R = {radius}: {len(senders)} edges, want "
-        f"{SAND_BLOCK_EDGES} (the graph the peers were timed on)")
-  moving = ~np.isin(types, mpm.KINEMATIC_TYPES)
-  return BenchGraph(
-      "sand_block", positions, types, moving, stats, bounds, radius, senders,
-      receivers, ps, pr,
-      {"source": npz, "n_particles": int(positions.shape[1]),
-       "n_moving": int(moving.sum()), "n_boundary": 0,
-       "edges_checked": SAND_BLOCK_EDGES})
-
-
-def make_paper_scene(sizes: Sizes, radius: float = 0.015) -> BenchGraph:
-  """Frames ``window_start``.. of the simulated paper scene, with all of its
-  boundary particles as static nodes (``rollout.trajectory_nodes``)."""
-  scene = mpm.Scene.from_dict({**scenes.PAPER_SCENE,
-                               "num_frames": sizes.scene_frames})
-  result = mpm.simulate(scene)
-  t0 = sizes.window_start
-  window = result.positions[t0:t0 + INPUT_FRAMES + 1]
-  if window.shape[0] != INPUT_FRAMES + 1:
-    raise ValueError(f"paper scene: {sizes.scene_frames} frames hold no "
-                     f"window of {INPUT_FRAMES + 1} from frame {t0}")
-  traj = mpm_io.Trajectory.from_result(result)
-  traj = dataclasses.replace(traj, positions=window)
-  positions, types, moving = rollout_lib.trajectory_nodes(
-      traj, INPUT_FRAMES + 1)
-  fd = mpm_io.finite_difference_stats([result.positions])
-  stats = features.Stats(*(np.asarray(fd[k], np.float32) for k in
-                           features.Stats._fields))
-  bounds = np.array([[0.0, scene.domain.width], [0.0, scene.domain.height]],
-                    np.float32)
-  senders, receivers, ps, pr = _radius_graph(positions[INPUT_FRAMES - 1],
-                                             bounds, radius)
-  n_sand = int(result.positions.shape[1])
-  return BenchGraph(
-      "paper_scene", positions.astype(np.float32), types, moving, stats,
-      bounds, radius, senders, receivers, ps, pr,
-      {"scene": scene.to_dict(),
-       "frames": [t0, t0 + INPUT_FRAMES], "n_particles": n_sand,
-       "n_moving": int(moving.sum()),
-       "n_boundary": int(positions.shape[1]) - n_sand,
-       "stats": "finite differences of the simulated trajectory "
-                f"({sizes.scene_frames} frames)"})
-
-
-# ------------------------------------------------------------ the model ---
-
-
-def load_config(name: str):
-  return importlib.import_module(f"experiments.configs.{name}").get_config()
-
-
-def _mlp_flops(rows: int, sizes: Sequence[int]) -> int:
-  """2 x multiply-adds of dense layers sizes[0] -> sizes[1] -> ... on rows."""
-  return 2 * rows * sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
-
-
-def dense_flops(model: models.EncodeProcessDecode, n_nodes: int,
-                n_edges: int, node_features: int) -> dict[str, int]:
-  """FLOPs of the model's dense layers: ``models.processor_flops`` plus the
-  encoders and the decoder (2 per multiply-add)."""
-  l, hl = model.latent_size, model.hidden_layers
-  hidden = [l] * hl
-  enc = (_mlp_flops(n_nodes, [node_features + model.type_embedding_size]
-                    + hidden + [l]) +
-         _mlp_flops(n_edges, [3] + hidden + [l]))
-  dec = _mlp_flops(n_nodes, [l] + hidden + [model.output_size])
-  proc = models.processor_flops(n_nodes, n_edges, l, hl,
-                                model.num_message_passing_steps,
-                                model.split_first_layer)
-  return {"processor": proc, "encoders": enc, "decoder": dec,
-          "total": proc + enc + dec}
-
-
-def _node_feature_size() -> int:
-  return 2 * (INPUT_FRAMES - 1) + 4
-
-
-def init_params(model: models.EncodeProcessDecode, seed: int = 0):
-  n, e = 8, 8
-  return model.init(jax.random.key(seed),
-                    jnp.zeros((n, _node_feature_size())),
-                    jnp.zeros((n,), jnp.int32), jnp.zeros((e, 3)),
-                    jnp.zeros((e,), jnp.int32), jnp.zeros((e,), jnp.int32))
-
-
-def concat_params(params):
-  """The concatenated-form parameters computing the same function."""
-  mapped = dict(params["params"])
-  for name in mapped:
-    if name.startswith("step_"):
-      mapped[name] = models.split_to_concat_params(mapped[name])
-  return {"params": mapped}
-
-
-def forward_fn(model, radius: float):
-  """jit of ``simulator.predict``: (params, inputs, types, senders,
-  receivers, context) -> normalised accelerations [N, 2]."""
-  def fn(params, inputs, particle_type, senders, receivers, context):
-    return simulator.predict(model, params, inputs, particle_type, senders,
-                             receivers, context, radius)
-  return jax.jit(fn)
-
-
-def train_step_fn(model, tx, radius: float):
-  """jit of one training step at batch 1 (``train.Trainer``'s, unbatched):
-  loss and gradients of ``simulator.loss``, clipping and Adam (``tx``)."""
-  def step(state, inputs, target, particle_type, moving, senders, receivers,
-           context):
-    def loss_fn(params):
-      return simulator.loss(model, params, inputs, target, particle_type,
-                            moving, senders, receivers, context, radius)
-    loss, grads = jax.value_and_grad(loss_fn)(state.params)
-    updates, opt_state = tx.update(grads, state.opt_state, state.params)
-    params = optax.apply_updates(state.params, updates)
-    return state.replace(step=state.step + 1, params=params,
-                         opt_state=opt_state), loss
-  return jax.jit(step, donate_argnums=0)
-
-
-class _Runner:
-  """Compiled forward and training step of one model on one graph."""
-
-  def __init__(self, config, g: BenchGraph, params=None, padded=False):
-    self.model = train.create_model(config.model)
-    self.tx = train.create_optimizer(config.train)
-    self.params = init_params(self.model) if params is None else params
-    s, r = ((g.padded_senders, g.padded_receivers) if padded
-            else (g.senders, g.receivers))
-    self.graph = g
-    self.fwd_args = (self.params, jnp.asarray(g.positions[:INPUT_FRAMES]),
-                     jnp.asarray(g.particle_type), jnp.asarray(s),
-                     jnp.asarray(r), g.context)
-    self.n_edges_computed = int(s.shape[0])
-
-  def compile_forward(self):
-    self.fwd = timing.compile_program(
-        forward_fn(self.model, self.graph.radius), *self.fwd_args)
-    self.fwd_compile_s, self.fwd_xla_flops = (self.fwd.compile_s,
-                                              self.fwd.flops)
-
-  def forward(self):
-    return self.fwd(*self.fwd_args)
-
-  def compile_train(self):
-    g = self.graph
-    _, inputs, types, s, r, ctx = self.fwd_args
-    self.train_args = (inputs, jnp.asarray(g.positions[INPUT_FRAMES]), types,
-                       jnp.asarray(g.moving), s, r, ctx)
-    self.state = self._fresh_state()
-    self.step = timing.compile_program(
-        train_step_fn(self.model, self.tx, g.radius), self.state,
-        *self.train_args)
-    self.train_compile_s, self.train_xla_flops = (self.step.compile_s,
-                                                  self.step.flops)
-
-  def _fresh_state(self):
-    params = jax.tree.map(jnp.array, self.params)  # a copy: state is donated
-    return train.TrainState(jnp.zeros((), jnp.int32), params,
-                            self.tx.init(params), jax.random.key(0))
-
-  def train_step(self):
-    self.state, loss = self.step(self.state, *self.train_args)
-    return loss
-
-  def dense_flops(self):
-    return dense_flops(self.model, self.graph.n_nodes, self.n_edges_computed,
-                       _node_feature_size())
-
-
 def _rate(flops, seconds):
   return None if flops is None else flops / seconds / 1e9
 
@@ -429,7 +107,7 @@ def _fraction(gflops, matmul):
   return None if gflops is None else gflops / matmul
 
 
-def _row_flops(row: dict, runner: _Runner) -> None:
+def _row_flops(row: dict, runner: gns_programs.Runner) -> None:
   fwd_s = row["forward"]["median_s"]
   dense = runner.dense_flops()
   row["flops"] = {"forward_dense": dense, "forward_xla": runner.fwd_xla_flops}
@@ -459,13 +137,14 @@ def _model_info(name: str, config) -> dict[str, Any]:
           "split_first_layer": m.split_first_layer}
 
 
-def measure_model(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
+def measure_model(name: str, g: gns_inputs.BenchGraph, sizes: Sizes,
+                  matmul: gns_programs.Matmul,
                   log: Callable[[str], None], *, train_step: bool = True,
                   padded: bool = False) -> dict[str, Any]:
   """Items 1 and 3: forward (and training) step of one model on one graph,
   interleaved with the reference matmul."""
-  config = load_config(name)
-  runner = _Runner(config, g, padded=padded)
+  config = gns_programs.load_config(name)
+  runner = gns_programs.Runner(config, g, padded=padded)
   runner.compile_forward()
   row = {"model": _model_info(name, config), "scene": g.name,
          "n_nodes": g.n_nodes, "n_edges": g.n_edges,
@@ -509,18 +188,20 @@ def measure_model(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
   return row
 
 
-def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
+def measure_split(name: str, g: gns_inputs.BenchGraph, sizes: Sizes,
+                  matmul: gns_programs.Matmul,
                   log: Callable[[str], None]) -> dict[str, Any]:
   """Items 4 and 5: split first edge layer vs the concatenated form (same
   function), all four programs and the matmul interleaved; then where each
   program spends its time (``op_profile``)."""
-  config = load_config(name)
-  split_cfg = load_config(name)
+  config = gns_programs.load_config(name)
+  split_cfg = gns_programs.load_config(name)
   split_cfg.model.split_first_layer = True
-  concat_cfg = load_config(name)
+  concat_cfg = gns_programs.load_config(name)
   concat_cfg.model.split_first_layer = False
-  split = _Runner(split_cfg, g)
-  concat = _Runner(concat_cfg, g, params=concat_params(split.params))
+  split = gns_programs.Runner(split_cfg, g)
+  concat = gns_programs.Runner(
+      concat_cfg, g, params=gns_programs.concat_params(split.params))
   for r in (split, concat):
     r.compile_forward()
     r.compile_train()
@@ -563,7 +244,8 @@ def measure_split(name: str, g: BenchGraph, sizes: Sizes, matmul: Matmul,
     out["xla_forward_flops_ratio"] = (out["concat"]["xla_forward_flops"] /
                                       out["split"]["xla_forward_flops"])
   out["target_speedup"] = gns_report.TARGET_SPLIT_SPEEDUP
-  out["forward_target_met"] = out["forward_speedup"] >= gns_report.TARGET_SPLIT_SPEEDUP
+  out["forward_target_met"] = (out["forward_speedup"] >=
+                               gns_report.TARGET_SPLIT_SPEEDUP)
   out["train_step_target_met"] = (out["train_step_speedup"] >=
                                   gns_report.TARGET_SPLIT_SPEEDUP)
   log(f"split vs concatenated first edge layer ({name} model on {g.name}, "
@@ -620,15 +302,15 @@ def run_benchmark(out_dir: str, sand_block_dir: str, quick: bool = False,
   """
   sizes = QUICK if quick else FULL
   # Inputs first: a bad directory fails now, not after minutes of timing.
-  readme = os.path.join(sand_block_dir, SAND_BLOCK_README)
+  readme = os.path.join(sand_block_dir, gns_inputs.SAND_BLOCK_README)
   quotes = gns_report.check_quotes(readme)
-  sand = load_sand_block(sand_block_dir)
+  sand = gns_inputs.load_sand_block(sand_block_dir)
   results: dict[str, Any] = {"environment": timing.environment(quick),
                              "sizes": dataclasses.asdict(sizes)}
-  matmul = Matmul(sizes.matmul_size)
+  matmul = gns_programs.Matmul(sizes.matmul_size)
   log(f"sand block: {sand.n_nodes} particles, {sand.n_edges} edges at R = "
-      f"{sand.radius} (checked: {SAND_BLOCK_EDGES})")
-  scene = make_paper_scene(sizes)
+      f"{sand.radius} (checked: {gns_inputs.SAND_BLOCK_EDGES})")
+  scene = gns_inputs.make_paper_scene(sizes.scene_frames, sizes.window_start)
   log(f"paper scene: frames {scene.info['frames'][0]}-"
       f"{scene.info['frames'][1]}, {scene.info['n_particles']} sand + "
       f"{scene.info['n_boundary']} boundary nodes, {scene.n_edges} edges")

@@ -143,7 +143,8 @@ class _Peer:
     if not enabled:
       return
     try:
-      taichi_peer = importlib.import_module("experiments.benchmarks.taichi_peer")
+      taichi_peer = importlib.import_module(
+          "experiments.benchmarks.taichi_peer")
     except ImportError as e:
       self.reason = (f"taichi is not importable ({e}); install the optional "
                      "dependency with `pip install -e .[bench]`")

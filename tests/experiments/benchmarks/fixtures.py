@@ -11,7 +11,7 @@ import tempfile
 import numpy as np
 
 import mpm
-from experiments.benchmarks import gns_benchmark
+from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import gns_report
 from gnsjax import graph
 
@@ -33,27 +33,27 @@ def write_sand_block(directory: str, readme: bool = True) -> int:
   i, j = np.meshgrid(np.arange(40), np.arange(25), indexing="ij")
   base = np.stack([0.44 + 0.005 * i.ravel(), 0.1025 + 0.005 * j.ravel()], -1)
   base += rng.uniform(-0.001, 0.001, base.shape)
-  frames = gns_benchmark.INPUT_FRAMES + 1
+  frames = gns_inputs.INPUT_FRAMES + 1
   fall = -1e-5 * np.arange(frames)**2  # m, as under gravity
   positions = (base[None] + np.stack([np.zeros(frames), fall], -1)[:, None])
-  np.savez(os.path.join(directory, gns_benchmark.SAND_BLOCK_NPZ),
+  np.savez(os.path.join(directory, gns_inputs.SAND_BLOCK_NPZ),
            positions=positions.astype(np.float32),
            particle_type=np.full(len(base), mpm.SAND_TYPE, np.int32))
   metadata = {"bounds": BOUNDS, "default_connectivity_radius": RADIUS,
               "dim": 2, "dt": 0.0025,
               "vel_mean": [0.0, -1e-4], "vel_std": [1e-4, 1e-4],
               "acc_mean": [0.0, -2e-5], "acc_std": [1e-5, 1e-5]}
-  with open(os.path.join(directory, gns_benchmark.SAND_BLOCK_METADATA),
+  with open(os.path.join(directory, gns_inputs.SAND_BLOCK_METADATA),
             "w") as f:
     json.dump(metadata, f)
   if readme:
-    with open(os.path.join(directory, gns_benchmark.SAND_BLOCK_README),
+    with open(os.path.join(directory, gns_inputs.SAND_BLOCK_README),
               "w") as f:
       f.write("# Shared benchmark input\n\n" + "\n".join(
           f"{peer}: {p['forward_s']:.2f} s per forward step and\n"
           f"{p['train_step_s']:.2f} s per training step."
           for peer, p in gns_report.PEERS.items()) + "\n")
-  last = positions[gns_benchmark.INPUT_FRAMES - 1]
+  last = positions[gns_inputs.INPUT_FRAMES - 1]
   return len(graph.brute_force_edges(last.astype(np.float32), RADIUS))
 
 

@@ -22,8 +22,8 @@ HAS_TAICHI = importlib.util.find_spec("taichi") is not None
 class PeerTest(absltest.TestCase):
 
   def test_missing_taichi_is_skipped_with_a_message(self):
-    with mock.patch.dict(sys.modules, {"taichi": None,
-                                       "experiments.benchmarks.taichi_peer": None}):
+    with mock.patch.dict(sys.modules, {
+        "taichi": None, "experiments.benchmarks.taichi_peer": None}):
       peer = mpm_benchmark._Peer(  # pylint: disable=protected-access
           enabled=True, num_threads=None)
     self.assertFalse(peer.available)
