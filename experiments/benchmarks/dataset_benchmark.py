@@ -1,5 +1,8 @@
 """Dataset benchmark: generation throughput and reading speed.
 
+  python -m experiments.benchmarks --what=dataset --out=docs/benchmarks \
+      --read_data=data/small
+
 ``run_benchmark(out_dir)`` measures, in one run on this machine:
 
 1. the wall time to generate 20 paper trajectories (16 training, 4 test
@@ -15,10 +18,10 @@ Writes ``dataset_benchmark.json`` and ``.md`` to ``out_dir``.
 import os
 import tempfile
 
+from experiments.benchmarks import timing
 from gnsjax import batching
 from gnsjax import data
 from gnsjax import graph
-from experiments.benchmarks import timing
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -27,6 +30,9 @@ PAPER_TOTAL = 1100
 
 def time_generation(spec: dataset.DatasetSpec, workers: int,
                     cache: str | None) -> dict:
+  """Generates ``spec`` into a temporary directory with ``workers``
+  processes; seconds (wall, simulation, fixed), bytes written and the
+  extrapolations to the paper's 1100 trajectories (minutes)."""
   with tempfile.TemporaryDirectory() as d:
     # Timed whole: start-up and compilation are part of generating.
     meta, wall = timing.wall(lambda: dataset.generate(
@@ -46,6 +52,8 @@ def time_generation(spec: dataset.DatasetSpec, workers: int,
 
 def time_reading(data_dir: str, windows: int = 2000, batch_size: int = 2,
                  batches: int = 200) -> dict:
+  """Windows per second read from the training split of ``data_dir``, and
+  padded batches of ``batch_size`` windows assembled per second."""
   path = data.split_path(data_dir, "train")
   header = mpm_io.read_header(path)
   spec = graph.GraphSpec(float(header["connectivity_radius"]),

@@ -1,13 +1,16 @@
 """Inverse-design benchmark: what a gradient costs against the forward rollout.
 
+  python -m experiments.benchmarks --what=design --out=docs/benchmarks
+
 ``run_benchmark(out_dir)`` measures, in one run on this machine, for the MPM
 and the GNS on the small config's scene (250 particles, the shipped model)
 and on a paper scene (1000 particles; the paper-sized GNS with untrained
 weights, since cost does not depend on the weights):
 
 - the forward rollout and the gradient of an objective with respect to the
-  obstacle's x (rematerialised per step/frame), each jitted, warmed up,
-  synchronised, the median of repeats; their ratio (target: at most 4);
+  obstacle's x (rematerialised per step/frame), each compiled apart, warmed
+  up and timed interleaved (``timing``: medians of repeats, seconds); their
+  ratio (target: at most 4);
 - the gradient program's memory as XLA allocates it (``memory_analysis``:
   temporaries, arguments, outputs; target: a paper scene within 2 GB), at
   the full 600 frames even where the timing uses fewer frames.
@@ -22,8 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.benchmarks import timing
 from experiments import tasks
+from experiments.benchmarks import timing
 from gnsjax import design
 from gnsjax import evaluate
 from gnsjax import features

@@ -1,7 +1,9 @@
 """MPM benchmark: cost per substep and per trajectory, scaling, batching, peer.
 
+  python -m experiments.benchmarks --what=mpm --out=docs/benchmarks
+
 One library call, :func:`run_benchmark`, measures the JAX MLS-MPM solver and
-writes what it measured (JSON and Markdown) to a directory:
+writes what it measured (``mpm_benchmark.json`` and ``.md``) to a directory:
 
 1. the paper scene (1000 particles, one semicircle): microseconds per substep
    (``jax.jit`` of ``mpm.solver.rollout`` over a few frames) and seconds per
@@ -34,9 +36,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import mpm
 from experiments.benchmarks import scenes
 from experiments.benchmarks import timing
+import mpm
 
 # A granular box large enough for 5000 particles at 0.005 m spacing (the
 # default box holds ~3300 above the ramp); used for every row of the particle
