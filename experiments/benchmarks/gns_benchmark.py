@@ -288,10 +288,10 @@ def run_benchmark(out_dir: str, sand_block_dir: str, quick: bool = False,
 
   Args:
     out_dir: directory for the results (created if missing).
+    sand_block_dir: directory of the shared sand block window
+      (``gns_inputs.load_sand_block``) and of the README quoting the peers.
     quick: tiny sizes (``QUICK``), seconds instead of minutes.
     log: called with one line per measurement.
-    sand_block_dir: directory of the shared sand block window
-      (``load_sand_block``) and of the README quoting the peers.
 
   Returns:
     The results (the JSON's content) with the Markdown under "markdown".
