@@ -5,6 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out
+SAND_BLOCK_DIR ?=
 
 .PHONY: demo test test-all bench clean
 
@@ -23,9 +24,12 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(PY) -m pytest -n 2 -q -m ""
 
+# The gns benchmark times the shared sand block window, which is not part of
+# the repository: make bench SAND_BLOCK_DIR=/path/to/window
 bench: $(STAMP)
+	@test -n "$(SAND_BLOCK_DIR)" || { echo "make bench needs SAND_BLOCK_DIR=<directory of sand_block_window.npz>" >&2; exit 2; }
 	$(PY) -m pip install -q -e ".[bench]"
-	$(PY) -m experiments.benchmark --out=docs/benchmarks
+	$(PY) -m experiments.benchmarks --what=mpm,gns --out=docs/benchmarks --sand_block_dir=$(SAND_BLOCK_DIR)
 
 clean:
 	rm -rf $(VENV) $(OUT) .jax_cache

@@ -1,4 +1,4 @@
-"""Tests for `experiments.taichi_peer` (skipped without taichi)."""
+"""Tests for `experiments.benchmarks.taichi_peer` (skipped without taichi)."""
 
 import dataclasses
 import importlib.util
@@ -19,7 +19,9 @@ HAS_TAICHI = importlib.util.find_spec("taichi") is not None
 class TaichiPeerTest(absltest.TestCase):
 
   def test_matches_jax_substeps_where_sand_hits_solids(self):
-    from experiments import taichi_peer  # pylint: disable=g-import-not-at-top
+    # Imported here: the module imports taichi at its top.
+    # pylint: disable-next=g-import-not-at-top
+    from experiments.benchmarks import taichi_peer
     taichi_peer.init()
     setup = mpm.setup(mpm.Scene.from_dict({"obstacles": [
         {"shape": "rectangle", "x": 0.9, "width": 0.04, "height": 0.05}]}))

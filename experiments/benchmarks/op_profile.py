@@ -1,5 +1,7 @@
 """Where a compiled XLA program spends its time, by kind of operation.
 
+Used by the GNS benchmark (``gns_benchmark``, item 5: ``--what=gns``).
+
 ``breakdown(compiled, call)`` runs ``call`` (which executes ``compiled``)
 under ``jax.profiler``, reads back the per-operation events of the trace and
 sums their durations by what each operation of the optimised HLO does:

@@ -1,5 +1,7 @@
 """A Taichi (CPU) MLS-MPM peer of ``mpm.solver.substep``, for the benchmark.
 
+Timed and checked by the MPM benchmark (``mpm_benchmark``: ``--what=mpm``).
+
 Written for the benchmark, not a second solver to maintain: the same scene and
 physics as the JAX solver, so that the two can be timed against each other
 and checked against each other.

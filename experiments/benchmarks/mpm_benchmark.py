@@ -1,7 +1,9 @@
 """MPM benchmark: cost per substep and per trajectory, scaling, batching, peer.
 
+  python -m experiments.benchmarks --what=mpm --out=docs/benchmarks
+
 One library call, :func:`run_benchmark`, measures the JAX MLS-MPM solver and
-writes what it measured (JSON and Markdown) to a directory:
+writes what it measured (``mpm_benchmark.json`` and ``.md``) to a directory:
 
 1. the paper scene (1000 particles, one semicircle): microseconds per substep
    (``jax.jit`` of ``mpm.solver.rollout`` over a few frames) and seconds per
@@ -10,15 +12,15 @@ writes what it measured (JSON and Markdown) to a directory:
 3. throughput of vmapped batches (``mpm.simulate_setups`` on several scenes)
    against the single-scene path on the same scenes;
 4. a peer, MLS-MPM of the same scene and physics in Taichi (CPU backend,
-   ``experiments/taichi_peer.py``), timed the same way in the same run, and
+   ``taichi_peer.py``), timed the same way in the same run, and
    checked to be the same physics: positions after a few frames agree with
    the JAX solver's.
 
-Timing rules (DESIGN.md, "Honest timing"): compilation and a warm-up run are
-excluded; every JAX call is waited on with ``jax.block_until_ready`` and every
-Taichi run with ``ti.sync()``; each figure is the median of repeats (the
-minimum is recorded beside it); peers run in the same process on the same
-scenes; ratios are reported beside absolute times.
+Timing follows ``timing``'s rules: compilation and a warm-up run excluded;
+every JAX call waited on with ``jax.block_until_ready``, every Taichi run
+with ``ti.sync()``; each figure the median of repeats (the minimum recorded
+beside it); peers in the same process on the same scenes; ratios beside
+absolute times.
 
 Taichi is optional (``pip install -e .[bench]``): without it the peer is
 skipped with a message and the rest runs.
@@ -26,23 +28,18 @@ skipped with a message and the rest runs.
 
 import dataclasses
 import importlib
-import json
-import os
 import statistics
-import time
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 from absl import logging
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from experiments.benchmarks import scenes
+from experiments.benchmarks import timing
 import mpm
-from experiments import benchlib
 
-# The paper scene of the benchmark: default heap of 1000 particles.
-PAPER_SCENE = {"name": "paper_semicircle",
-               "obstacles": [{"shape": "semicircle", "x": 0.9, "radius": 0.04}]}
 # A granular box large enough for 5000 particles at 0.005 m spacing (the
 # default box holds ~3300 above the ramp); used for every row of the particle
 # sweep so that only the particle count changes.
@@ -102,51 +99,32 @@ QUICK = Sizes(substep_frames=1, repeats=2, trajectory_frames=11,
 # ---------------------------------------------------------------- timing ---
 
 
-def _summary(seconds: Sequence[float], units: int) -> dict[str, Any]:
-  """Median and minimum of repeated timings, per unit of work, in us."""
-  per = [s / units * 1e6 for s in seconds]
-  return {"median_us": statistics.median(per), "min_us": min(per),
-          "repeats": len(per), "units_per_repeat": units}
-
-
 def time_jax_substeps(setup: mpm.Setup, n_frames: int,
                       repeats: int) -> dict[str, Any]:
   """Microseconds per substep of ``jax.jit(mpm.solver.rollout)``.
 
-  Compiles once (timed separately), runs once to warm up, then times
-  ``repeats`` rollouts of ``n_frames`` frames from the initial state.
+  Compiles once (``compile_s``, excluded), then times ``repeats`` rollouts of
+  ``n_frames`` frames from the initial state after a warm-up.
   """
   args = (setup.state, setup.params, setup.field)
-  start = time.perf_counter()
-  compiled = _rollout.lower(*args, spec=setup.spec, n_frames=n_frames,
-                            n_substeps=setup.n_substeps).compile()
-  compile_s = time.perf_counter() - start
-  jax.block_until_ready(compiled(*args))
-  seconds = []
-  for _ in range(repeats):
-    start = time.perf_counter()
-    jax.block_until_ready(compiled(*args))
-    seconds.append(time.perf_counter() - start)
-  return {**_summary(seconds, n_frames * setup.n_substeps),
-          "compile_s": compile_s}
+  program = timing.compile_program(_rollout, *args, spec=setup.spec,
+                                   n_frames=n_frames,
+                                   n_substeps=setup.n_substeps)
+  seconds = timing.time_calls({"jax": lambda: program(*args)}, repeats)
+  return {**timing.per_unit_us(seconds["jax"], n_frames * setup.n_substeps),
+          "compile_s": program.compile_s}
 
 
 def time_peer_substeps(peer, n_frames: int, repeats: int) -> dict[str, Any]:
   """Microseconds per substep of the Taichi peer, measured as the JAX one:
-  warm-up (and kernel compilation) first, each repeat from the initial state,
-  ``ti.sync()`` before the clock stops."""
+  a warm-up (``warmup_s``: kernel compilation included) first, each repeat
+  from the initial state (reset outside the clock); ``run_substeps`` ends
+  with ``ti.sync()``."""
   n = n_frames * peer.n_substeps
-  start = time.perf_counter()
-  peer.reset()
-  peer.run_substeps(peer.n_substeps)
-  warmup_s = time.perf_counter() - start
-  seconds = []
-  for _ in range(repeats):
-    peer.reset()
-    start = time.perf_counter()
-    peer.run_substeps(n)
-    seconds.append(time.perf_counter() - start)
-  return {**_summary(seconds, n), "warmup_s": warmup_s}
+  seconds = timing.time_calls({"taichi": lambda: peer.run_substeps(n)},
+                              repeats, prepare={"taichi": peer.reset})
+  return {**timing.per_unit_us(seconds["taichi"], n),
+          "warmup_s": seconds["taichi"]["warmup_s"]}
 
 
 def _ratio(a: float | None, b: float | None) -> float | None:
@@ -167,7 +145,8 @@ class _Peer:
     if not enabled:
       return
     try:
-      taichi_peer = importlib.import_module("experiments.taichi_peer")
+      taichi_peer = importlib.import_module(
+          "experiments.benchmarks.taichi_peer")
     except ImportError as e:
       self.reason = (f"taichi is not importable ({e}); install the optional "
                      "dependency with `pip install -e .[bench]`")
@@ -230,37 +209,34 @@ def measure_paper_scene(setup: mpm.Setup, sizes: Sizes, peer: _Peer,
 
   # Whole trajectories through the user-facing path: mpm.simulate's
   # wall_time_s excludes compilation; a first run warms up.
-  first = mpm.simulate(scene)
-  walls = [mpm.simulate(scene).wall_time_s
-           for _ in range(sizes.trajectory_repeats)]
+  first, walls = timing.self_timed(lambda: mpm.simulate(scene),
+                                   sizes.trajectory_repeats,
+                                   lambda result: result.wall_time_s)
   n_chunks, chunk = mpm.simulation.chunking(scene.num_frames, 50)
   substeps = n_chunks * chunk * setup.n_substeps
   out["trajectory"] = {
       "frames": scene.num_frames, "substeps_run": substeps,
-      "jax_s": statistics.median(walls), "jax_min_s": min(walls),
-      "repeats": len(walls), "compile_s": first.compile_time_s,
-      "jax_us_per_substep": statistics.median(walls) / substeps * 1e6}
+      "jax_s": walls["median_s"], "jax_min_s": walls["min_s"],
+      "repeats": walls["repeats"], "compile_s": first.compile_time_s,
+      "jax_us_per_substep": walls["median_s"] / substeps * 1e6}
   log(f"paper scene, {scene.num_frames}-frame trajectory (mpm.simulate, "
       f"{substeps} substeps): JAX {out['trajectory']['jax_s']:.2f} s (median "
-      f"of {len(walls)}; compile {first.compile_time_s:.1f} s excluded)")
+      f"of {walls['repeats']}; compile {first.compile_time_s:.1f} s "
+      "excluded)")
   if peer.available:
     p = peer.build(setup)
-    p.reset()
-    p.advance(1)  # warm-up
-    seconds = []
-    for _ in range(sizes.trajectory_repeats):
-      p.reset()
-      start = time.perf_counter()
-      p.advance(scene.num_frames - 1)  # positions copied out every frame
-      seconds.append(time.perf_counter() - start)
+    # Positions are copied out every frame, as mpm.simulate does.
+    seconds = timing.time_calls(
+        {"taichi": lambda: p.advance(scene.num_frames - 1)},
+        sizes.trajectory_repeats, prepare={"taichi": p.reset})["taichi"]
     t = out["trajectory"]
-    t["taichi_s"] = statistics.median(seconds)
+    t["taichi_s"] = seconds["median_s"]
     t["taichi_substeps_run"] = (scene.num_frames - 1) * setup.n_substeps
     t["taichi_over_jax"] = _ratio(
         t["taichi_s"] / t["taichi_substeps_run"], t["jax_s"] / substeps)
     log(f"paper scene, {scene.num_frames}-frame trajectory: Taichi "
         f"{t['taichi_s']:.2f} s ({t['taichi_substeps_run']} substeps, median "
-        f"of {len(seconds)})")
+        f"of {seconds['repeats']})")
   return out
 
 
@@ -331,10 +307,12 @@ def measure_obstacle_scaling(sizes: Sizes, peer: _Peer,
 def _time_setups(setups: list[mpm.Setup], frames: int,
                  repeats: int) -> list[float]:
   """Seconds of ``repeats`` warm runs of ``mpm.simulate_setups`` (one chunk
-  of ``frames`` frames; its wall_time_s excludes compilation)."""
-  mpm.simulate_setups(setups, chunk_frames=frames)  # compile and warm up
-  return [mpm.simulate_setups(setups, chunk_frames=frames)[0].wall_time_s *
-          len(setups) for _ in range(repeats)]
+  of ``frames`` frames; its wall_time_s excludes compilation and is shared
+  out among the scenes, hence the product)."""
+  _, seconds = timing.self_timed(
+      lambda: mpm.simulate_setups(setups, chunk_frames=frames), repeats,
+      lambda results: results[0].wall_time_s * len(results))
+  return seconds["all_s"]
 
 
 def measure_batches(sizes: Sizes, log: Callable[[str], None]) -> dict:
@@ -502,23 +480,17 @@ def run_benchmark(out_dir: str, *, quick: bool = False, taichi: bool = True,
   peer = _Peer(taichi, taichi_threads)
   if not peer.available:
     log(f"Taichi peer skipped: {peer.reason}")
-  results: dict[str, Any] = {"environment": benchlib.environment(
+  results: dict[str, Any] = {"environment": timing.environment(
       quick, taichi=peer.info if peer.available else {"skipped": peer.reason}),
                              "sizes": dataclasses.asdict(sizes)}
   paper = mpm.setup(mpm.Scene.from_dict(
-      {**PAPER_SCENE, "num_frames": sizes.trajectory_frames}))
+      {**scenes.PAPER_SCENE, "num_frames": sizes.trajectory_frames}))
   results["paper_scene"] = measure_paper_scene(paper, sizes, peer, log)
   results["agreement"] = measure_agreement(paper, sizes, peer, log)
   results["particle_scaling"] = measure_particle_scaling(sizes, peer, log)
   results["obstacle_scaling"] = measure_obstacle_scaling(sizes, peer, log)
   results["batches"] = measure_batches(sizes, log)
-  results["environment"]["load_average_end"] = list(os.getloadavg())
-
-  markdown = to_markdown(results)
-  os.makedirs(out_dir, exist_ok=True)
-  stem = os.path.join(out_dir, "mpm_benchmark" + ("_quick" if quick else ""))
-  benchlib.write_atomic(stem + ".json", json.dumps(results, indent=1) + "\n")
-  benchlib.write_atomic(stem + ".md", markdown)
-  results["markdown"] = markdown
-  results["files"] = [stem + ".json", stem + ".md"]
+  timing.end_environment(results["environment"])
+  timing.write_results(out_dir, "mpm_benchmark", quick, results,
+                       to_markdown(results))
   return results

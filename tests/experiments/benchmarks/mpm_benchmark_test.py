@@ -1,4 +1,4 @@
-"""Tests for `experiments.benchmark` and `experiments.mpm_benchmark`."""
+"""Tests for `experiments.benchmarks.mpm_benchmark` and `--what=mpm`."""
 
 import importlib.util
 import json
@@ -11,8 +11,9 @@ from absl.testing import absltest
 from absl.testing import flagsaver
 import pytest
 
-from experiments import benchmark
-from experiments import mpm_benchmark
+from experiments.benchmarks import __main__ as benchmarks_main
+from experiments.benchmarks import mpm_benchmark
+from tests.experiments.benchmarks import fixtures
 
 FLAGS = flags.FLAGS
 HAS_TAICHI = importlib.util.find_spec("taichi") is not None
@@ -21,8 +22,8 @@ HAS_TAICHI = importlib.util.find_spec("taichi") is not None
 class PeerTest(absltest.TestCase):
 
   def test_missing_taichi_is_skipped_with_a_message(self):
-    with mock.patch.dict(sys.modules, {"taichi": None,
-                                       "experiments.taichi_peer": None}):
+    with mock.patch.dict(sys.modules, {
+        "taichi": None, "experiments.benchmarks.taichi_peer": None}):
       peer = mpm_benchmark._Peer(  # pylint: disable=protected-access
           enabled=True, num_threads=None)
     self.assertFalse(peer.available)
@@ -40,10 +41,10 @@ class BenchmarkQuickTest(absltest.TestCase):
   def test_quick_mode_writes_and_prints_results(self):
     if not FLAGS.is_parsed():
       FLAGS.mark_as_parsed()
-    out = self.create_tempdir().full_path
+    out = fixtures.tempdir(self)
     with flagsaver.flagsaver(out=out, quick=True, taichi=HAS_TAICHI,
                              what=["mpm"]):
-      benchmark.main(["benchmark"])
+      benchmarks_main.main(["benchmarks"])
 
     with open(os.path.join(out, "mpm_benchmark_quick.json")) as f:
       results = json.load(f)

@@ -1,13 +1,16 @@
 """Inverse-design benchmark: what a gradient costs against the forward rollout.
 
+  python -m experiments.benchmarks --what=design --out=docs/benchmarks
+
 ``run_benchmark(out_dir)`` measures, in one run on this machine, for the MPM
 and the GNS on the small config's scene (250 particles, the shipped model)
 and on a paper scene (1000 particles; the paper-sized GNS with untrained
 weights, since cost does not depend on the weights):
 
 - the forward rollout and the gradient of an objective with respect to the
-  obstacle's x (rematerialised per step/frame), each jitted, warmed up,
-  synchronised, the median of repeats; their ratio (target: at most 4);
+  obstacle's x (rematerialised per step/frame), each compiled apart, warmed
+  up and timed interleaved (``timing``: medians of repeats, seconds); their
+  ratio (target: at most 4);
 - the gradient program's memory as XLA allocates it (``memory_analysis``:
   temporaries, arguments, outputs; target: a paper scene within 2 GB), at
   the full 600 frames even where the timing uses fewer frames.
@@ -16,16 +19,14 @@ Writes ``design_benchmark.json`` and ``.md``.
 """
 
 import json
-import os
 import resource
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments import benchlib
 from experiments import tasks
+from experiments.benchmarks import timing
 from gnsjax import design
 from gnsjax import evaluate
 from gnsjax import features
@@ -39,18 +40,10 @@ RATIO_TARGET = 4.0
 MEMORY_TARGET_GB = 2.0
 
 
-def _median(fn, repeats: int) -> float:
-  jax.block_until_ready(fn())  # warm-up (compiles)
-  times = []
-  for _ in range(repeats):
-    start = time.perf_counter()
-    jax.block_until_ready(fn())
-    times.append(time.perf_counter() - start)
-  return float(np.median(times))
-
-
-def _memory_gb(jitted, *args) -> dict:
-  m = jitted.lower(*args).compile().memory_analysis()
+def _memory_gb(program: timing.Compiled) -> dict:
+  """XLA's allocation for a compiled program (GB): temporaries, and all of
+  temporaries + arguments + outputs."""
+  m = program.executable.memory_analysis()
   total = (m.temp_size_in_bytes + m.argument_size_in_bytes +
            m.output_size_in_bytes)
   return {"temp_gb": m.temp_size_in_bytes / GB, "total_gb": total / GB}
@@ -75,40 +68,61 @@ def paper_gns(placement):
   return model, params, problem
 
 
-def measure(name: str, sim, objective, timed_frames: int, full_frames: int,
-            repeats: int, log, remat: bool = True) -> dict:
+def _programs(sim, objective, remat: bool):
+  """(forward, gradient, args, nodes) of a design rollout, freshly jitted.
+
+  Fresh ``jax.jit`` objects each call: ``sim.num_frames`` is read at trace
+  time, and a jitted function reused after changing it would return its
+  cached trace of the old length.
+  """
   params = sim.placement.initial()
   if isinstance(sim, design.GNSRollout):
     forward = jax.jit(lambda p, mp, nb: sim.positions(p, mp, nb,
                                                       remat=False)[0])
     grad = jax.jit(jax.grad(lambda p, mp, nb: objective(
         sim.positions(p, mp, nb, remat=remat)[0])))
-    args = (params, sim.model_params, sim.nbrs)
-    nodes = len(sim.types)
-  else:
-    forward = jax.jit(lambda p: sim.positions(p, remat=False)[0])
-    grad = jax.jit(jax.grad(lambda p: objective(
-        sim.positions(p, remat=remat)[0])))
-    args = (params,)
-    nodes = sim.setup.n_particles
+    return forward, grad, (params, sim.model_params, sim.nbrs), len(sim.types)
+  forward = jax.jit(lambda p: sim.positions(p, remat=False)[0])
+  grad = jax.jit(jax.grad(lambda p: objective(
+      sim.positions(p, remat=remat)[0])))
+  return forward, grad, (params,), sim.setup.n_particles
+
+
+def measure(name: str, sim, objective, timed_frames: int, full_frames: int,
+            repeats: int, log, remat: bool = True) -> dict:
+  """Forward rollout and gradient of one design rollout, timed interleaved
+  over ``timed_frames`` frames; the gradient's memory at ``full_frames``.
+
+  Returns:
+    A row: seconds (``forward_s``, ``gradient_s``: medians), their ratio,
+    compile seconds, and XLA memory in GB at ``memory_frames``.
+  """
+  forward, grad, args, nodes = _programs(sim, objective, remat)
   log(f"{name}: timing {timed_frames} frames")
-  t_forward = _median(lambda: forward(*args), repeats)
-  t_grad = _median(lambda: grad(*args), repeats)
-  memory = _memory_gb(grad, *args)
+  forward = timing.compile_program(forward, *args)
+  grad = timing.compile_program(grad, *args)
+  times = timing.time_calls({"forward": lambda: forward(*args),
+                             "gradient": lambda: grad(*args)}, repeats)
+  t_forward = times["forward"]["median_s"]
+  t_grad = times["gradient"]["median_s"]
   row = {"case": name, "particles_or_nodes": nodes,
          "timed_frames": timed_frames, "forward_s": t_forward,
          "gradient_s": t_grad, "ratio": t_grad / t_forward,
-         "memory_frames": timed_frames, **memory}
+         "compile_s": {"forward": forward.compile_s,
+                       "gradient": grad.compile_s},
+         "memory_frames": timed_frames, **_memory_gb(grad)}
   if full_frames != timed_frames:
     sim.num_frames = full_frames
-    row.update(memory_frames=full_frames, **_memory_gb(grad, *args))
+    _, full_grad, args, _ = _programs(sim, objective, remat)
+    row.update(memory_frames=full_frames,
+               **_memory_gb(timing.compile_program(full_grad, *args)))
   log(json.dumps(row))
   return row
 
 
 def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
                   log=print) -> dict:
-  env = benchlib.environment(quick)
+  env = timing.environment(quick)
   frames = 20 if quick else 600
   paper_gns_frames = 12 if quick else 50
   objective = objectives.make("passed_fraction", x_protect=0.4).smooth
@@ -144,14 +158,9 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
   results = {"environment": env, "rows": rows,
              "peak_rss_gb": resource.getrusage(
                  resource.RUSAGE_SELF).ru_maxrss * 1024 / GB}
-  os.makedirs(out_dir, exist_ok=True)
-  suffix = "_quick" if quick else ""
-  files = [os.path.join(out_dir, f"design_benchmark{suffix}.{e}")
-           for e in ("json", "md")]
-  benchlib.write_atomic(files[0], json.dumps(results, indent=2))
-  results["markdown"] = markdown(results)
-  benchlib.write_atomic(files[1], results["markdown"])
-  results["files"] = files
+  timing.end_environment(env)
+  timing.write_results(out_dir, "design_benchmark", quick, results,
+                       markdown(results))
   return results
 
 
@@ -159,7 +168,7 @@ def markdown(results: dict) -> str:
   env = results["environment"]
   lines = [
       "# Inverse-design benchmark", "",
-      f"`python -m experiments.benchmark --what=design`, {env['date']}, "
+      f"`python -m experiments.benchmarks --what=design`, {env['date']}, "
       f"{env['cpu_count']} CPU cores, jax {env['jax_version']} "
       f"({env['jax_backend']}), load average at start "
       f"{env['load_average_start'][0]:.2f}.", "",

@@ -1,5 +1,8 @@
 """Dataset benchmark: generation throughput and reading speed.
 
+  python -m experiments.benchmarks --what=dataset --out=docs/benchmarks \
+      --read_data=data/small
+
 ``run_benchmark(out_dir)`` measures, in one run on this machine:
 
 1. the wall time to generate 20 paper trajectories (16 training, 4 test
@@ -12,15 +15,13 @@
 Writes ``dataset_benchmark.json`` and ``.md`` to ``out_dir``.
 """
 
-import json
 import os
 import tempfile
-import time
 
+from experiments.benchmarks import timing
 from gnsjax import batching
 from gnsjax import data
 from gnsjax import graph
-from experiments import benchlib
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -29,11 +30,13 @@ PAPER_TOTAL = 1100
 
 def time_generation(spec: dataset.DatasetSpec, workers: int,
                     cache: str | None) -> dict:
+  """Generates ``spec`` into a temporary directory with ``workers``
+  processes; seconds (wall, simulation, fixed), bytes written and the
+  extrapolations to the paper's 1100 trajectories (minutes)."""
   with tempfile.TemporaryDirectory() as d:
-    start = time.perf_counter()
-    meta = dataset.generate(spec, d, workers=workers,
-                            compilation_cache=cache)
-    wall = time.perf_counter() - start
+    # Timed whole: start-up and compilation are part of generating.
+    meta, wall = timing.wall(lambda: dataset.generate(
+        spec, d, workers=workers, compilation_cache=cache))
     size = sum(os.path.getsize(os.path.join(d, f)) for f in os.listdir(d))
   n = spec.num_train + spec.num_test
   simulation = meta["wall_time_s"]["train"] + meta["wall_time_s"]["test"]
@@ -49,35 +52,38 @@ def time_generation(spec: dataset.DatasetSpec, workers: int,
 
 def time_reading(data_dir: str, windows: int = 2000, batch_size: int = 2,
                  batches: int = 200) -> dict:
+  """Windows per second read from the training split of ``data_dir``, and
+  padded batches of ``batch_size`` windows assembled per second."""
   path = data.split_path(data_dir, "train")
   header = mpm_io.read_header(path)
   spec = graph.GraphSpec(float(header["connectivity_radius"]),
                          tuple(map(tuple, header["bounds"])))
   with data.WindowDataset(path, seed=0) as ds:
-    ds[0]
-    start = time.perf_counter()
-    for k in range(windows):
-      ds[k]
-    read = windows / (time.perf_counter() - start)
-    start = time.perf_counter()
-    for b in range(batches):
-      batching.make_batch([ds[b * batch_size + i] for i in range(batch_size)],
-                          spec)
-    assembled = batches / (time.perf_counter() - start)
-  return {"windows_per_s": read, "batches_per_s": assembled,
-          "batch_size": batch_size}
+    def read():
+      for k in range(windows):
+        ds[k]
+
+    def assemble():
+      for b in range(batches):
+        batching.make_batch([ds[b * batch_size + i]
+                             for i in range(batch_size)], spec)
+
+    ds[0]  # warm-up: opens the file
+    _, read_s = timing.wall(read)
+    _, batch_s = timing.wall(assemble)
+  return {"windows_per_s": windows / read_s,
+          "batches_per_s": batches / batch_s, "batch_size": batch_size}
 
 
 def run_benchmark(out_dir: str, read_data: str | None = None,
                   quick: bool = False, cache: str | None = None,
                   log=print) -> dict:
   """Measures generation and reading; writes JSON and Markdown."""
-  os.makedirs(out_dir, exist_ok=True)
   spec = dataset.DatasetSpec(num_train=2 if quick else 16,
                              num_test=1 if quick else 4,
                              num_frames=20 if quick else 600,
                              spacing=0.01 if quick else 0.005)
-  env = benchlib.environment(quick)
+  env = timing.environment(quick)
   results = {"environment": env, "spec": dict(spec.__dict__),
              "generation": []}
   for workers in (2, 1):
@@ -115,10 +121,7 @@ def run_benchmark(out_dir: str, read_data: str | None = None,
     lines += ["", f"Reading `{read_data}`: {r['windows_per_s']:.0f} random "
               f"windows/s; {r['batches_per_s']:.0f} padded batches of "
               f"{r['batch_size']} windows/s."]
-  results["markdown"] = "\n".join(lines) + "\n"
-  name = "dataset_benchmark_quick" if quick else "dataset_benchmark"
-  benchlib.write_atomic(os.path.join(out_dir, f"{name}.json"), json.dumps(
-      {k: v for k, v in results.items() if k != "markdown"}, indent=1))
-  benchlib.write_atomic(os.path.join(out_dir, f"{name}.md"),
-                        results["markdown"])
+  timing.end_environment(env)
+  timing.write_results(out_dir, "dataset_benchmark", quick, results,
+                       "\n".join(lines) + "\n")
   return results
