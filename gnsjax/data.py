@@ -159,10 +159,15 @@ class WindowDataset:
       self._epoch, self._order = epoch, order
     return int(self._order[i])
 
-  def __getitem__(self, k: int) -> Window:
+  def locate(self, k: int) -> tuple[int, int]:
+    """(trajectory, first stored frame) of window k of the stream, without
+    reading it."""
     flat = self._flat_index(k)
     t = int(np.searchsorted(self._offsets, flat, side="right") - 1)
-    start = flat - int(self._offsets[t])
+    return t, flat - int(self._offsets[t])
+
+  def __getitem__(self, k: int) -> Window:
+    t, start = self.locate(k)
     positions = self._positions[t][start:start + self.span:self.stride]
     return Window(positions, *self._static_arrays(t), t, start, self._scene(t))
 

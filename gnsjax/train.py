@@ -172,7 +172,7 @@ CONFIG_KEYS = {
               "fold_noise", "motion_weighting", "pushforward_steps",
               "pushforward_probability", "lr_init", "lr_min",
               "lr_decay_steps", "clip_norm", "node_bucket",
-              "capacity_multiplier", "max_wall_time_s"),
+              "capacity_multiplier", "max_wall_time_s", "device_windows"),
     "checkpoint": ("every_steps", "named_steps", "keep"),
     "eval": ("every_steps", "num_windows", "rollout_steps", "num_rollouts"),
 }
@@ -487,6 +487,17 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                                seed=tcfg.seed,
                                frame_stride=tcfg.frame_stride,
                                motion_weighting=tcfg.motion_weighting)
+  device_windows = None
+  if tcfg.device_windows:
+    if problem.boundary_particles:
+      raise ValueError("config.train.device_windows = True needs "
+                       "config.model.boundary_particles = False (boundary "
+                       "particles are chosen per window on the host)")
+    device_windows = batching.DeviceWindows(
+        data.split_path(data_dir, "train"), problem.spec,
+        input_frames=tcfg.input_frames + pushforward,
+        frame_stride=tcfg.frame_stride, node_bucket=tcfg.node_bucket,
+        sdf_spacing=problem.sdf_spacing)
   writer = tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
   csv_path = os.path.join(workdir, "metrics.csv")
   schedule = learning_rate_schedule(tcfg.lr_init, tcfg.lr_min,
@@ -503,7 +514,12 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
     if csv_file.tell() == 0:
       out.writeheader()
     for step in range(start, tcfg.num_steps):
-      batch = trainer.make_batch(_windows(dataset, step, tcfg.batch_size))
+      if device_windows is not None:
+        where = np.array([dataset.locate(step * tcfg.batch_size + i)
+                          for i in range(tcfg.batch_size)])
+        batch = device_windows.batch(where[:, 0], where[:, 1])
+      else:
+        batch = trainer.make_batch(_windows(dataset, step, tcfg.batch_size))
       # A pure function of (seed, step), so a resumed run pushes forward at
       # the same steps.
       push = pushforward if pushforward and np.random.default_rng(

@@ -53,6 +53,10 @@ def get_config() -> ml_collections.ConfigDict:
   # inputs this many steps on (no gradient) and learns from its own output.
   config.train.pushforward_steps = 0
   config.train.pushforward_probability = 0.0
+  # Gather training windows on the device from the whole split stored there
+  # (batching.DeviceWindows) instead of reading them on the host; needs
+  # model.boundary_particles = False.
+  config.train.device_windows = False
   # Stop (with a checkpoint) after this much training time (s); 0: never.
   config.train.max_wall_time_s = 0.0
   config.train.lr_init = 1e-4
