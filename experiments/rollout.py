@@ -5,6 +5,9 @@
 
 Writes ``DIR/predicted.h5`` and ``DIR/truth.h5`` (trajectory files with the
 same groups; frames before the model's first prediction are the true inputs).
+Both hold every ``frame_stride``-th stored frame (the model's learned step),
+their scenes' ``frame_dt`` set to match. ``--noproject`` switches the solid
+constraint off (to see what the model alone does).
 """
 
 import os
@@ -19,14 +22,18 @@ _WORKDIR = flags.DEFINE_string("workdir", None, "Training run directory.")
 _DATA = flags.DEFINE_string("data", None, "Dataset directory.")
 _OUT = flags.DEFINE_string("out", None, "Output directory.")
 _SPLIT = flags.DEFINE_string("split", "test", "Which split to roll out.")
-_MAX = flags.DEFINE_integer("max_trajectories", None, "First N only.")
+_MAX = flags.DEFINE_integer("max_trajectories", None, "First N only.",
+                            lower_bound=1)
+_PROJECT = flags.DEFINE_bool("project", True, "Keep sand out of solids after "
+                             "every learned step.")
 
 
 def main(argv):
   del argv
   runtime.enable_compilation_cache()
   paths = tasks.rollout_to_files(_WORKDIR.value, _DATA.value, _OUT.value,
-                                 _SPLIT.value, _MAX.value)
+                                 _SPLIT.value, _MAX.value,
+                                 project=_PROJECT.value)
   for name, path in paths.items():
     print(f"{name}: {path}")
 
