@@ -8,6 +8,7 @@ an MPM | GNS animation, and prints where everything is.
 
 from absl import app
 from absl import flags
+from absl import logging
 
 from experiments import runtime
 from experiments import tasks
@@ -22,6 +23,9 @@ _PRETRAINED = flags.DEFINE_bool("pretrained", True,
 
 def main(argv):
   del argv
+  # Orbax and XLA log every checkpoint and compilation at INFO: not for the
+  # demo's reader (progress bars and the final figures are).
+  logging.set_verbosity(logging.WARNING)
   runtime.enable_compilation_cache()
   paths = tasks.demo(_OUT.value, num_train=_TRAIN.value,
                      num_frames=_FRAMES.value,
