@@ -29,6 +29,20 @@ Its inputs are built in ``gns_inputs``, the programs it times in
    and LagrangeBench were timed) and holds exactly the graph's edges, no
    capacity padding; one more row times the paper model on the neighbour
    list's padded capacity, as rollouts run it.
+
+   The model sees the solids through the scene's signed distance field
+   (``mpm.SDFGrid`` sampled at R / 6): node features [N, 2 (C - 1) + 3] =
+   13, ten velocities and the SDF's clipped distance and weighted normal.
+   The sand block has no scene of its own: it takes the SDF of the paper's
+   default scene (``scenes.PAPER_SCENE``). Before the SDF features the
+   model had 14 node features (the four distances to the box walls in
+   place of the SDF's three), as in the figures recorded before them: the
+   input layer lost one column (2 L FLOPs per node, under 0.01% of a
+   forward) and the wall distances became a bilinear lookup in the grid,
+   so those figures remain comparable. Every model is timed on the same
+   graphs, boundary nodes included, although the small config's model now
+   leaves boundary particles out (``model.boundary_particles``): the rows
+   compare models, not training recipes.
 2. peers, quoted in ``gns_report.PEERS`` from the window's README (not
    re-run; the README, where present, is checked to still quote them):
    geoelements/gns and LagrangeBench on the sand block; ours as a ratio.
@@ -309,12 +323,16 @@ def run_benchmark(out_dir: str, sand_block_dir: str, quick: bool = False,
                              "sizes": dataclasses.asdict(sizes)}
   matmul = gns_programs.Matmul(sizes.matmul_size)
   log(f"sand block: {sand.n_nodes} particles, {sand.n_edges} edges at R = "
-      f"{sand.radius} (checked: {gns_inputs.SAND_BLOCK_EDGES})")
+      f"{sand.radius} (checked: {gns_inputs.SAND_BLOCK_EDGES}); solids: the "
+      f"SDF of {sand.scene.name}")
   scene = gns_inputs.make_paper_scene(sizes.scene_frames, sizes.window_start)
   log(f"paper scene: frames {scene.info['frames'][0]}-"
       f"{scene.info['frames'][1]}, {scene.info['n_particles']} sand + "
       f"{scene.info['n_boundary']} boundary nodes, {scene.n_edges} edges")
-  results["scenes"] = {g.name: {**g.info, "n_nodes": g.n_nodes,
+  results["scenes"] = {g.name: {**g.info, **g.sdf_info,
+                                "n_nodes": g.n_nodes,
+                                "n_node_features":
+                                    gns_programs.node_feature_size(),
                                 "n_edges": g.n_edges,
                                 "edge_capacity": int(len(g.padded_senders)),
                                 "radius": g.radius,

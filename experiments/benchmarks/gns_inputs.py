@@ -7,6 +7,12 @@
 * the paper scene (``make_paper_scene``), simulated with ``mpm.simulate``,
   with its boundary (ramp and obstacle) particles as static nodes.
 
+The model sees the solids through its scene's signed distance field
+(``mpm.SDFGrid``, node features [N, 2 (C - 1) + 3]): the paper scene's own,
+and for the sand block, which has no scene of its own, that of the paper's
+default scene ``scenes.PAPER_SCENE``. The grids are sampled at R / 6, the
+configs' default ``model.sdf_spacing``.
+
 Both graphs are computed before any clock starts and hold exactly their
 edges (no capacity padding); the neighbour list's padded form rides along
 for the row that times it.
@@ -20,11 +26,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.benchmarks import scenes
+from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import rollout as rollout_lib
 from gnsjax import simulator
 import mpm
+from mpm import geometry
 from mpm import io as mpm_io
 
 # The shared benchmark input: a directory (--sand_block_dir) holding these
@@ -35,6 +43,21 @@ SAND_BLOCK_README = "README.md"
 SAND_BLOCK_EDGES = 24_930  # at R = 0.015 m, self-pairs included
 # C, input frames per window (as the configs' input_frames and the peers).
 INPUT_FRAMES = 6
+# SDF grid spacing per connectivity radius: the configs' default
+# (``model.sdf_spacing`` None: R / 6, ``gnsjax.train``).
+SDF_SPACING_PER_RADIUS = 1 / 6
+
+
+def sdf_spacing(radius: float) -> float:
+  """The SDF grid spacing (m) of a model of connectivity radius R (m) whose
+  config leaves ``model.sdf_spacing`` unset."""
+  return radius * SDF_SPACING_PER_RADIUS
+
+
+def paper_scene(num_frames: int = 1) -> mpm.Scene:
+  """``scenes.PAPER_SCENE`` as an ``mpm.Scene`` of ``num_frames`` frames."""
+  return mpm.Scene.from_dict({**scenes.PAPER_SCENE,
+                              "num_frames": num_frames})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,6 +69,8 @@ class BenchGraph:
     positions: float32 [C + 1, N, 2] (m): C inputs, then the target.
     particle_type: int32 [N]; moving: bool [N].
     stats: normalisation statistics; bounds: [2, 2] (m); radius: R (m).
+    scene: the scene whose solids the model sees; solids: its SDF grid at
+      ``sdf_spacing(radius)``.
     senders, receivers: int32 [E], the graph's edges (no padding).
     padded_senders, padded_receivers: int32 [capacity], the neighbour list's
       edges with padding entries equal to N (as rollouts use them).
@@ -58,6 +83,8 @@ class BenchGraph:
   stats: features.Stats
   bounds: np.ndarray
   radius: float
+  scene: mpm.Scene
+  solids: geometry.SDFGrid
   senders: np.ndarray
   receivers: np.ndarray
   padded_senders: np.ndarray
@@ -77,6 +104,19 @@ class BenchGraph:
     return simulator.Context(
         features.Stats(*(jnp.asarray(s, jnp.float32) for s in self.stats)),
         jnp.asarray(self.bounds, jnp.float32))
+
+  def solids_at(self, spacing: float | None = None) -> geometry.SDFGrid:
+    """The scene's SDF grid at ``spacing`` (m; default: ``solids``')."""
+    if spacing is None or spacing == self.solids.spacing:
+      return self.solids
+    return data.solids_of(self.scene, spacing)
+
+  @property
+  def sdf_info(self) -> dict:
+    """What to record about the solids the model sees."""
+    return {"sdf_scene": self.scene.name,
+            "sdf_spacing": float(self.solids.spacing),
+            "sdf_grid": list(self.solids.values.shape[:2])}
 
 
 def _radius_graph(last: np.ndarray, bounds: np.ndarray, radius: float):
@@ -108,7 +148,8 @@ def sand_block_files(directory: str) -> list[str]:
 
 
 def load_sand_block(directory: str) -> BenchGraph:
-  """The shared sand block window, its metadata and graph.
+  """The shared sand block window, its metadata and graph; the solids the
+  model sees are the paper scene's (``scenes.PAPER_SCENE``).
 
   Args:
     directory: holds ``sand_block_window.npz`` (positions float32
@@ -139,9 +180,10 @@ def load_sand_block(directory: str) -> BenchGraph:
         f"sand block graph at R = {radius}: {len(senders)} edges, want "
         f"{SAND_BLOCK_EDGES} (the graph the peers were timed on)")
   moving = ~np.isin(types, mpm.KINEMATIC_TYPES)
+  scene = paper_scene()
   return BenchGraph(
-      "sand_block", positions, types, moving, stats, bounds, radius, senders,
-      receivers, ps, pr,
+      "sand_block", positions, types, moving, stats, bounds, radius, scene,
+      data.solids_of(scene, sdf_spacing(radius)), senders, receivers, ps, pr,
       {"source": npz, "n_particles": int(positions.shape[1]),
        "n_moving": int(moving.sum()), "n_boundary": 0,
        "edges_checked": SAND_BLOCK_EDGES})
@@ -151,10 +193,9 @@ def make_paper_scene(scene_frames: int, window_start: int,
                      radius: float = 0.015) -> BenchGraph:
   """Frames ``window_start``.. of the paper scene simulated for
   ``scene_frames`` frames, with all of its boundary particles as static
-  nodes (``rollout.trajectory_nodes``) and statistics from its finite
-  differences; the graph at ``radius`` (m)."""
-  scene = mpm.Scene.from_dict({**scenes.PAPER_SCENE,
-                               "num_frames": scene_frames})
+  nodes (``rollout.trajectory_nodes``), its SDF grid, and statistics from
+  its finite differences; the graph at ``radius`` (m)."""
+  scene = paper_scene(scene_frames)
   result = mpm.simulate(scene)
   t0 = window_start
   window = result.positions[t0:t0 + INPUT_FRAMES + 1]
@@ -163,8 +204,11 @@ def make_paper_scene(scene_frames: int, window_start: int,
                      f"window of {INPUT_FRAMES + 1} from frame {t0}")
   traj = mpm_io.Trajectory.from_result(result)
   traj = dataclasses.replace(traj, positions=window)
-  positions, types, moving = rollout_lib.trajectory_nodes(
-      traj, INPUT_FRAMES + 1)
+  # C + 1 frames at stride 1: the inputs, then the target.
+  nodes = rollout_lib.trajectory_nodes(traj, INPUT_FRAMES + 1, 1,
+                                       boundary=True,
+                                       sdf_spacing=sdf_spacing(radius))
+  positions, types, moving = nodes.window, nodes.types, nodes.moving
   fd = mpm_io.finite_difference_stats([result.positions])
   stats = features.Stats(*(np.asarray(fd[k], np.float32) for k in
                            features.Stats._fields))
@@ -175,7 +219,7 @@ def make_paper_scene(scene_frames: int, window_start: int,
   n_sand = int(result.positions.shape[1])
   return BenchGraph(
       "paper_scene", positions.astype(np.float32), types, moving, stats,
-      bounds, radius, senders, receivers, ps, pr,
+      bounds, radius, scene, nodes.solids, senders, receivers, ps, pr,
       {"scene": scene.to_dict(),
        "frames": [t0, t0 + INPUT_FRAMES], "n_particles": n_sand,
        "n_moving": int(moving.sum()),

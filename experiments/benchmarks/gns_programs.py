@@ -1,10 +1,11 @@
 """The programs the GNS benchmark times, and their FLOPs.
 
-``Runner`` compiles one model's forward step (features + model: a window of
-C = 6 input frames [C, N, 2] (m) to normalised accelerations [N, 2]) and
-training step (loss, gradient, clipping and Adam, batch 1) on one graph;
-``dense_flops`` counts the FLOPs of their dense layers; ``Matmul`` is the
-machine's reference rate that runs beside them.
+``Runner`` compiles one model's forward step (``simulator.predict``,
+features + model: a window of C = 6 input frames [C, N, 2] (m) and its
+scene's SDF grid to normalised accelerations [N, 2]) and training step
+(loss, gradient, clipping and Adam, batch 1) on one graph; ``dense_flops``
+counts the FLOPs of their dense layers; ``Matmul`` is the machine's
+reference rate that runs beside them.
 """
 
 import importlib
@@ -17,6 +18,7 @@ import optax
 
 from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import timing
+from gnsjax import features
 from gnsjax import models
 from gnsjax import simulator
 from gnsjax import train
@@ -80,16 +82,16 @@ def dense_flops(model: models.EncodeProcessDecode, n_nodes: int,
           "total": proc + enc + dec}
 
 
-def _node_feature_size() -> int:
-  return 2 * (gns_inputs.INPUT_FRAMES - 1) + 4
+def node_feature_size() -> int:
+  """F of the node features of a window of C = ``gns_inputs.INPUT_FRAMES``
+  frames: 2 (C - 1) velocities and 3 of the scene's SDF
+  (``features.num_node_features``)."""
+  return features.num_node_features(gns_inputs.INPUT_FRAMES)
 
 
 def init_params(model: models.EncodeProcessDecode, seed: int = 0):
-  n, e = 8, 8
-  return model.init(jax.random.key(seed),
-                    jnp.zeros((n, _node_feature_size())),
-                    jnp.zeros((n,), jnp.int32), jnp.zeros((e, 3)),
-                    jnp.zeros((e,), jnp.int32), jnp.zeros((e,), jnp.int32))
+  """Initial parameters (cost does not depend on their values)."""
+  return models.init_params(model, jax.random.key(seed), node_feature_size())
 
 
 def concat_params(params):
@@ -102,22 +104,19 @@ def concat_params(params):
 
 
 def forward_fn(model, radius: float):
-  """jit of ``simulator.predict``: (params, inputs, types, senders,
-  receivers, context) -> normalised accelerations [N, 2]."""
-  def fn(params, inputs, particle_type, senders, receivers, context):
-    return simulator.predict(model, params, inputs, particle_type, senders,
-                             receivers, context, radius)
+  """jit of ``simulator.predict``: (params, graph, context) -> normalised
+  accelerations [N, 2] (graph: ``simulator.Graph``)."""
+  def fn(params, graph, context):
+    return simulator.predict(model, params, graph, context, radius)
   return jax.jit(fn)
 
 
 def train_step_fn(model, tx, radius: float):
   """jit of one training step at batch 1 (``train.Trainer``'s, unbatched):
   loss and gradients of ``simulator.loss``, clipping and Adam (``tx``)."""
-  def step(state, inputs, target, particle_type, moving, senders, receivers,
-           context):
+  def step(state, graph, target, context):
     def loss_fn(params):
-      return simulator.loss(model, params, inputs, target, particle_type,
-                            moving, senders, receivers, context, radius)
+      return simulator.loss(model, params, graph, target, context, radius)
     loss, grads = jax.value_and_grad(loss_fn)(state.params)
     updates, opt_state = tx.update(grads, state.opt_state, state.params)
     params = optax.apply_updates(state.params, updates)
@@ -137,6 +136,9 @@ class Runner:
     padded: run on the neighbour list's padded capacity, as rollouts do,
       instead of exactly the graph's edges.
 
+  The model sees the graph's SDF grid at the config's ``model.sdf_spacing``
+  (unset: the grid ``gns_inputs`` built, at R / 6, the configs' default).
+
   ``compile_forward`` and ``compile_train`` compile (``fwd``, ``step``:
   ``timing.Compiled``); ``forward`` and ``train_step`` then run one call
   each (the training state is donated and replaced by the new one).
@@ -151,9 +153,12 @@ class Runner:
             else (g.senders, g.receivers))
     self.graph = g
     c = gns_inputs.INPUT_FRAMES
-    self.fwd_args = (self.params, jnp.asarray(g.positions[:c]),
-                     jnp.asarray(g.particle_type), jnp.asarray(s),
-                     jnp.asarray(r), g.context)
+    solids = g.solids_at(config.model.sdf_spacing)
+    self.inputs = simulator.Graph(
+        jnp.asarray(g.positions[:c]), jnp.asarray(g.particle_type),
+        jnp.asarray(g.moving), jnp.asarray(s), jnp.asarray(r),
+        jax.tree.map(jnp.asarray, solids))
+    self.fwd_args = (self.params, self.inputs, g.context)
     self.n_edges_computed = int(s.shape[0])
 
   def compile_forward(self):
@@ -167,10 +172,9 @@ class Runner:
 
   def compile_train(self):
     g = self.graph
-    _, inputs, types, s, r, ctx = self.fwd_args
+    _, inputs, ctx = self.fwd_args
     target = jnp.asarray(g.positions[gns_inputs.INPUT_FRAMES])
-    self.train_args = (inputs, target, types,
-                       jnp.asarray(g.moving), s, r, ctx)
+    self.train_args = (inputs, target, ctx)
     self.state = self._fresh_state()
     self.step = timing.compile_program(
         train_step_fn(self.model, self.tx, g.radius), self.state,
@@ -189,4 +193,4 @@ class Runner:
 
   def dense_flops(self):
     return dense_flops(self.model, self.graph.n_nodes, self.n_edges_computed,
-                       _node_feature_size())
+                       node_feature_size())

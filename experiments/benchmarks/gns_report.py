@@ -95,6 +95,31 @@ def met(ok: bool) -> str:
   return "met" if ok else "**MISSED**"
 
 
+# Node features before the SDF features: 10 velocities and the distances to
+# the four box walls (figures recorded before them were measured so).
+PREVIOUS_NODE_FEATURES = 14
+
+
+def input_layer_note(results: dict[str, Any]) -> str:
+  """What the model's node features are in this run, and why figures from
+  before the SDF features remain comparable."""
+  scenes = results.get("scenes", {})
+  f = next((v["n_node_features"] for v in scenes.values()
+            if "n_node_features" in v), None)
+  if f is None:  # results written before the SDF features
+    return (f"Node features: {PREVIOUS_NODE_FEATURES} (10 velocities and the "
+            "distances to the four box walls).")
+  sdf = sorted({f"{v['sdf_scene']}'s at {v['sdf_spacing'] * 1e3:g} mm"
+                for v in scenes.values() if "sdf_scene" in v})
+  return (f"Node features: {f} (10 velocities, and the clipped distance and "
+          "weighted normal of the scene's signed distance field: "
+          + ", ".join(sdf) + "; the sand block, which has no scene, takes "
+          "the paper scene's). Figures recorded before the SDF features had "
+          f"{PREVIOUS_NODE_FEATURES} (four box-wall distances in place of the "
+          "SDF's three): one input column less in the encoder, under 0.01% "
+          "of a forward's FLOPs, so they remain comparable.")
+
+
 def to_markdown(results: dict[str, Any]) -> str:
   """The results as Markdown tables."""
   env = results["environment"]
@@ -113,6 +138,7 @@ def to_markdown(results: dict[str, Any]) -> str:
       "Forward step: one jitted call of `gnsjax.simulator.predict` (features "
       "+ model) on a window of 6 frames; the radius graph is computed "
       "before the clock starts and holds exactly the graph's edges. "
+      + input_layer_note(results) + " "
       "Training step: `simulator.loss`, its gradient, clipping and Adam "
       "(`train.create_optimizer`), batch 1, state donated; no noise. "
       "GFLOP/s: the dense layers' FLOPs (`models.processor_flops` + "

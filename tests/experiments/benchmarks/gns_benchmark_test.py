@@ -41,6 +41,13 @@ class GnsBenchmarkQuickTest(absltest.TestCase):
     self.assertIn("## Where the time goes", markdown)
     self.assertEqual(results["scenes"]["sand_block"]["n_edges"], n_edges)
     self.assertGreater(results["scenes"]["paper_scene"]["n_boundary"], 0)
+    # Both graphs see the paper scene's SDF (13 node features), and the
+    # report says so beside the 14 of figures recorded before.
+    for scene in results["scenes"].values():
+      self.assertEqual(scene["n_node_features"], 13)
+      self.assertEqual(scene["sdf_scene"], "paper_semicircle")
+    self.assertIn("Node features: 13", markdown)
+    self.assertIn("had 14", markdown)
     sizes = gns_benchmark.QUICK
     self.assertLen(results["steps"], 2 * len(sizes.models) + 1)
     for row in results["steps"]:

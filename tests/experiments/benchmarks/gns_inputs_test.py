@@ -10,6 +10,8 @@ import pytest
 
 from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import gns_report
+from experiments.benchmarks import scenes
+from mpm import geometry
 from tests.experiments.benchmarks import fixtures
 
 # The shared window the peers were timed on, where a machine has it.
@@ -33,6 +35,15 @@ class SandBlockTest(absltest.TestCase):
     # The padded list holds the same edges plus padding pointing at N.
     real = g.padded_senders < g.n_nodes
     np.testing.assert_array_equal(g.padded_senders[real], g.senders)
+    # No scene of its own: the solids are the paper scene's SDF at R / 6.
+    self.assertEqual(g.scene.name, scenes.PAPER_SCENE["name"])
+    self.assertAlmostEqual(g.solids.spacing, fixtures.RADIUS / 6)
+    domain = g.scene.domain
+    self.assertEqual(g.solids.values.shape, geometry.grid_shape(
+        domain.width, domain.height, fixtures.RADIUS / 6) + (3,))
+    self.assertEqual(g.sdf_info["sdf_scene"], scenes.PAPER_SCENE["name"])
+    self.assertIs(g.solids_at(None), g.solids)
+    self.assertEqual(g.solids_at(0.01).spacing, 0.01)
 
   def test_other_edge_count_is_refused(self):
     with self.assertRaisesRegex(RuntimeError, "want 24930"):

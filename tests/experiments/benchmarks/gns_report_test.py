@@ -41,5 +41,21 @@ class QuotesTest(absltest.TestCase):
     self.assertEqual(out["quoted_from"], "README.md")
 
 
+class InputLayerNoteTest(absltest.TestCase):
+
+  def test_note_names_the_features_and_the_previous_count(self):
+    scene = {"n_node_features": 13, "sdf_scene": "paper_semicircle",
+             "sdf_spacing": 0.0025}
+    note = gns_report.input_layer_note(
+        {"scenes": {"sand_block": scene, "paper_scene": scene}})
+    self.assertIn("Node features: 13", note)
+    self.assertIn("paper_semicircle's at 2.5 mm", note)
+    self.assertIn("had 14", note)
+
+  def test_results_from_before_the_sdf_features(self):
+    note = gns_report.input_layer_note({"scenes": {"sand_block": {}}})
+    self.assertIn("Node features: 14", note)
+
+
 if __name__ == "__main__":
   absltest.main()
