@@ -3,9 +3,12 @@
   python -m experiments.benchmarks --what=design --out=docs/benchmarks
 
 ``run_benchmark(out_dir)`` measures, in one run on this machine, for the MPM
-and the GNS on the small config's scene (250 particles, the shipped model)
-and on a paper scene (1000 particles; the paper-sized GNS with untrained
-weights, since cost does not depend on the weights):
+and the GNS on the small config's scene (250 particles, the shipped model
+``tasks.PRETRAINED``, loaded with ``train.load_run``) and on a paper scene
+(1000 particles; the paper-sized GNS of ``configs/paper.py`` with untrained
+weights, since cost does not depend on the weights), each through the
+``gnsjax.design`` rollouts (``mpm_positions``, ``gns_positions``: the
+placement's boundary nodes and SDF grid, the solid constraint):
 
 - the forward rollout and the gradient of an objective with respect to the
   obstacle's x (rematerialised per step/frame), each compiled apart, warmed
@@ -15,25 +18,28 @@ weights, since cost does not depend on the weights):
   temporaries, arguments, outputs; target: a paper scene within 2 GB), at
   the full 600 frames even where the timing uses fewer frames.
 
+Frames are stored frames (0.0025 s each). The GNS takes a learned step
+every ``frame_stride`` of them after its input frames (the shipped small
+model: 3, the paper model: 1), so ``timed_steps`` records the steps each
+row ran.
+
 Writes ``design_benchmark.json`` and ``.md``.
 """
 
+import functools
 import json
 import resource
 
 import jax
-import jax.numpy as jnp
-import numpy as np
 
 from experiments import tasks
 from experiments.benchmarks import timing
+from experiments.configs import paper as paper_config
 from gnsjax import design
-from gnsjax import evaluate
 from gnsjax import features
-from gnsjax import graph
 from gnsjax import models
-from gnsjax import objectives
 from gnsjax import train
+from gnsjax.design import objectives
 
 GB = 1024**3
 RATIO_TARGET = 4.0
@@ -49,73 +55,139 @@ def _memory_gb(program: timing.Compiled) -> dict:
   return {"temp_gb": m.temp_size_in_bytes / GB, "total_gb": total / GB}
 
 
-def paper_gns(placement):
-  """The paper-sized GNS (latent 128, 10 steps) with untrained weights."""
-  model = models.EncodeProcessDecode(latent_size=128, hidden_layers=2,
-                                     num_message_passing_steps=10,
-                                     type_embedding_size=16)
-  params = model.init(jax.random.key(0), jnp.zeros((4, 14)),
-                      jnp.zeros(4, jnp.int32), jnp.zeros((4, 3)),
-                      jnp.zeros(4, jnp.int32), jnp.zeros(4, jnp.int32))
-  bounds = ((0.0, placement.scene.domain.width),
-            (0.0, placement.scene.domain.height))
+def untrained_gns(placement: design.Placement, config):
+  """A GNS of ``config`` (``experiments/configs``) with untrained weights,
+  and its problem on the placement's domain: (model, params, problem)."""
+  model = train.create_model(config.model)
+  params = models.init_params(
+      model, jax.random.key(0),
+      features.num_node_features(config.train.input_frames))
+  domain = placement.scene.domain
   # Tiny accelerations: the heap stays a heap, so the graph keeps the size
   # of a real paper scene's.
-  stats = features.Stats(np.zeros(2, np.float32), np.full(2, 1e-3, np.float32),
-                         np.zeros(2, np.float32), np.full(2, 1e-6, np.float32))
-  problem = train.Problem(stats, np.asarray(bounds, np.float32), 0.015,
-                          graph.GraphSpec(0.015, bounds))
-  return model, params, problem
+  stored = {"vel_mean": [0.0, 0.0], "vel_std": [1e-3, 1e-3],
+            "acc_mean": [0.0, 0.0], "acc_std": [1e-6, 1e-6],
+            "bounds": [[0.0, domain.width], [0.0, domain.height]],
+            "radius": config.dataset.connectivity_radius, "noise_std": 0.0}
+  return model, params, train.problem_from_dict(config, stored)
 
 
-def _programs(sim, objective, remat: bool):
-  """(forward, gradient, args, nodes) of a design rollout, freshly jitted.
+def paper_gns(placement: design.Placement):
+  """The paper-sized GNS (``configs/paper.py``: latent 128, 10 steps, stride
+  1, boundary particles) with untrained weights: (model, params, problem)."""
+  return untrained_gns(placement, paper_config.get_config())
 
-  Fresh ``jax.jit`` objects each call: ``sim.num_frames`` is read at trace
-  time, and a jitted function reused after changing it would return its
-  cached trace of the old length.
+
+@functools.partial(jax.jit, static_argnames="remat")
+def _gns_forward(sim, params, model_params, nbrs, remat=False):
+  return design.gns_positions(sim, params, model_params, nbrs, remat=remat)
+
+
+@functools.partial(jax.jit, static_argnames=("objective", "remat"))
+def _gns_gradient(sim, params, model_params, nbrs, objective, remat=True):
+  return jax.grad(lambda p: objective(design.gns_positions(
+      sim, p, model_params, nbrs, remat=remat)[0]))(params)
+
+
+@functools.partial(jax.jit, static_argnames="remat")
+def _mpm_forward(sim, params, remat=False):
+  return design.mpm_positions(sim, params, remat=remat)[0]
+
+
+@functools.partial(jax.jit, static_argnames=("objective", "remat"))
+def _mpm_gradient(sim, params, objective, remat=True):
+  return jax.grad(lambda p: objective(design.mpm_positions(
+      sim, p, remat=remat)[0]))(params)
+
+
+def _programs(driver, sim, objective, remat: bool):
+  """(forward, gradient, args, nodes, steps) of a design rollout.
+
+  forward and gradient: (jitted function, its static keyword arguments).
+  ``sim`` is a jit argument whose settings (``num_frames``, ...) are static,
+  so a rollout of another length (``sim.replace(num_frames=n)``) is traced
+  and compiled anew. The GNS's model parameters and neighbour list are the
+  driver's. Steps: the GNS's learned steps, or the MPM's frames after the
+  first.
   """
   params = sim.placement.initial()
-  if isinstance(sim, design.GNSRollout):
-    forward = jax.jit(lambda p, mp, nb: sim.positions(p, mp, nb,
-                                                      remat=False)[0])
-    grad = jax.jit(jax.grad(lambda p, mp, nb: objective(
-        sim.positions(p, mp, nb, remat=remat)[0])))
-    return forward, grad, (params, sim.model_params, sim.nbrs), len(sim.types)
-  forward = jax.jit(lambda p: sim.positions(p, remat=False)[0])
-  grad = jax.jit(jax.grad(lambda p: objective(
-      sim.positions(p, remat=remat)[0])))
-  return forward, grad, (params,), sim.setup.n_particles
+  if isinstance(driver, design.GNSDriver):
+    return ((_gns_forward, {"remat": False}),
+            (_gns_gradient, {"objective": objective, "remat": remat}),
+            (sim, params, driver.model_params, driver.nbrs), len(sim.types),
+            sim.n_steps)
+  return ((_mpm_forward, {"remat": False}),
+          (_mpm_gradient, {"objective": objective, "remat": remat}),
+          (sim, params), sim.n_particles, sim.num_frames - 1)
 
 
-def measure(name: str, sim, objective, timed_frames: int, full_frames: int,
-            repeats: int, log, remat: bool = True) -> dict:
+def _compile(program, args) -> timing.Compiled:
+  fn, static = program
+  return timing.compile_program(fn, *args, **static)
+
+
+def _fit_graph(driver: design.GNSDriver, program, args):
+  """Compiles the GNS's forward ``program`` on ``args``; if its neighbour
+  list overflows in the rollout, lets the driver grow the list (its own
+  ``rollout``) and compiles again for the larger one. Returns (compiled,
+  args)."""
+  sim, params = args[:2]
+  compiled = _compile(program, args)
+  if bool(compiled(*args)[1]):
+    driver.rollout(params)
+    args = (sim, params, driver.model_params, driver.nbrs)
+    compiled = _compile(program, args)
+  return compiled, args
+
+
+def measure(name: str, driver, objective, timed_frames: int,
+            full_frames: int, repeats: int, log, remat: bool = True) -> dict:
   """Forward rollout and gradient of one design rollout, timed interleaved
   over ``timed_frames`` frames; the gradient's memory at ``full_frames``.
 
+  Args:
+    name: the row's label.
+    driver: a ``design.MPMDriver`` or ``design.GNSDriver``; its rollout is
+      run for ``timed_frames`` frames (``sim.replace(num_frames=...)``).
+    objective: a smooth objective of positions [T, N, 2] (static).
+    timed_frames, full_frames: stored frames (the GNS's input frames
+      included; it takes a learned step every ``frame_stride`` of them).
+    repeats: timed rounds.
+    log: called with progress and the row.
+    remat: rematerialise each step or frame in the gradient.
+
   Returns:
     A row: seconds (``forward_s``, ``gradient_s``: medians), their ratio,
-    compile seconds, and XLA memory in GB at ``memory_frames``.
+    compile seconds, steps timed, and XLA memory of the gradient in GB at
+    ``memory_frames``.
   """
-  forward, grad, args, nodes = _programs(sim, objective, remat)
-  log(f"{name}: timing {timed_frames} frames")
-  forward = timing.compile_program(forward, *args)
-  grad = timing.compile_program(grad, *args)
-  times = timing.time_calls({"forward": lambda: forward(*args),
+  sim = driver.sim.replace(num_frames=timed_frames)
+  forward, grad, args, nodes, steps = _programs(driver, sim, objective,
+                                                remat)
+  log(f"{name}: timing {timed_frames} frames ({steps} steps)")
+  if isinstance(driver, design.GNSDriver):
+    forward, args = _fit_graph(driver, forward, args)
+    forward_call = lambda: forward(*args)[0]
+  else:
+    forward = _compile(forward, args)
+    forward_call = lambda: forward(*args)
+  grad = _compile(grad, args)
+  times = timing.time_calls({"forward": forward_call,
                              "gradient": lambda: grad(*args)}, repeats)
   t_forward = times["forward"]["median_s"]
   t_grad = times["gradient"]["median_s"]
   row = {"case": name, "particles_or_nodes": nodes,
-         "timed_frames": timed_frames, "forward_s": t_forward,
-         "gradient_s": t_grad, "ratio": t_grad / t_forward,
+         "timed_frames": timed_frames, "timed_steps": steps,
+         "forward_s": t_forward, "gradient_s": t_grad,
+         "ratio": t_grad / t_forward,
          "compile_s": {"forward": forward.compile_s,
                        "gradient": grad.compile_s},
          "memory_frames": timed_frames, **_memory_gb(grad)}
   if full_frames != timed_frames:
-    sim.num_frames = full_frames
-    _, full_grad, args, _ = _programs(sim, objective, remat)
+    full = driver.sim.replace(num_frames=full_frames)
+    _, full_grad, full_args, _, _ = _programs(driver, full, objective, remat)
     row.update(memory_frames=full_frames,
-               **_memory_gb(timing.compile_program(full_grad, *args)))
+               **_memory_gb(_compile(full_grad, full_args)))
   log(json.dumps(row))
   return row
 
@@ -129,32 +201,36 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
   small = tasks.design_scene("semicircle", (0.04,), 1.0, frames)
   paper = tasks.design_scene("semicircle", (0.04,), 1.0, frames,
                              spacing=0.005, num_particles=1000)
+  mpm_driver = lambda scene: design.MPMDriver(
+      design.MPMRollout.create(design.Placement(scene)))
   rows = []
-  rows.append(measure("MPM, small scene",
-                      design.MPMRollout(design.Placement(small)), objective,
+  rows.append(measure("MPM, small scene", mpm_driver(small), objective,
                       frames, frames, repeats, log))
   # Without remat: the recompute's share of the ratio (memory grows with
   # every substep's residuals).
-  rows.append(measure("MPM, small scene, no remat",
-                      design.MPMRollout(design.Placement(small)), objective,
-                      frames, frames, repeats, log, remat=False))
-  rows.append(measure("MPM, paper scene",
-                      design.MPMRollout(design.Placement(paper)), objective,
+  rows.append(measure("MPM, small scene, no remat", mpm_driver(small),
+                      objective, frames, frames, repeats, log, remat=False))
+  rows.append(measure("MPM, paper scene", mpm_driver(paper), objective,
                       frames, frames, repeats, log))
-  config, problem, trainer, state, _ = evaluate.load_run(tasks.PRETRAINED,
-                                                         scene=small)
+  run = train.load_run(tasks.PRETRAINED)
+  placement = design.Placement(small)
+  window = design.mpm_window(small, run.problem.input_frames,
+                             run.problem.frame_stride)
   rows.append(measure(
       "GNS small model, small scene",
-      design.GNSRollout(design.Placement(small), trainer.model, state.params,
-                        problem, config.train.input_frames), objective,
-      frames, frames, repeats, log))
+      design.GNSDriver(design.GNSRollout.create(placement, run.model,
+                                                run.problem, window),
+                       run.params),
+      objective, frames, frames, repeats, log))
   placement = design.Placement(paper)
   model, params, problem = paper_gns(placement)
+  window = design.mpm_window(paper, problem.input_frames,
+                             problem.frame_stride)
   rows.append(measure(
       "GNS paper model, paper scene",
-      design.GNSRollout(placement, model, params, problem, 6,
-                        paper_gns_frames), objective,
-      paper_gns_frames, frames, repeats, log))
+      design.GNSDriver(design.GNSRollout.create(placement, model, problem,
+                                                window), params),
+      objective, paper_gns_frames, frames, repeats, log))
   results = {"environment": env, "rows": rows,
              "peak_rss_gb": resource.getrusage(
                  resource.RUSAGE_SELF).ru_maxrss * 1024 / GB}
@@ -176,12 +252,14 @@ def markdown(results: dict) -> str:
       f"rematerialised per step (GNS) or frame (MPM). Targets: gradient <= "
       f"{RATIO_TARGET:g}x the forward rollout; a paper scene's gradient "
       f"within {MEMORY_TARGET_GB:g} GB.", "",
-      "| case | particles (MPM) / nodes (GNS) | frames timed | forward (s) | "
-      "gradient (s) | gradient / forward | XLA memory of the gradient (GB) "
-      "| at frames |", "|---|---|---|---|---|---|---|---|"]
+      "| case | particles (MPM) / nodes (GNS) | frames timed (steps) | "
+      "forward (s) | gradient (s) | gradient / forward | XLA memory of the "
+      "gradient (GB) | at frames |", "|---|---|---|---|---|---|---|---|"]
   for r in results["rows"]:
+    steps = f" ({r['timed_steps']})" if "timed_steps" in r else ""
     lines.append(
-        f"| {r['case']} | {r['particles_or_nodes']} | {r['timed_frames']} | "
+        f"| {r['case']} | {r['particles_or_nodes']} | {r['timed_frames']}"
+        f"{steps} | "
         f"{r['forward_s']:.3f} | {r['gradient_s']:.3f} | "
         f"**{r['ratio']:.2f}x** | {r['total_gb']:.3f} (temporaries "
         f"{r['temp_gb']:.3f}) | {r['memory_frames']} |")
