@@ -3,7 +3,22 @@
 from absl.testing import absltest
 import numpy as np
 
+import mpm
 from gnsjax import metrics
+
+# A straight ramp y = 0.05 + 0.25 x (normal (-1, 4) / sqrt(17)), a semicircle
+# of radius 0.03 m standing on it at x = 0.1, sand spacing 0.01 m.
+SCENE = mpm.Scene.from_dict({
+    "name": "metrics", "domain": {"width": 0.4, "height": 0.3},
+    "ramp": {"kind": "polyline", "points": [[0.0, 0.05], [0.4, 0.15]]},
+    "obstacles": [{"shape": "semicircle", "x": 0.1, "radius": 0.03}],
+    "granular": {"box": [0.25, 0.2, 0.35, 0.28], "spacing": 0.01}})
+RAMP_NORMAL = np.array([-1.0, 4.0]) / np.sqrt(17.0)
+
+
+def on_ramp(x, depth):
+  """A point ``depth`` (m) below the ramp surface at abscissa x."""
+  return np.array([x, 0.05 + 0.25 * x]) - depth * RAMP_NORMAL
 
 
 class MetricsTest(absltest.TestCase):
@@ -37,6 +52,65 @@ class MetricsTest(absltest.TestCase):
     pred = true + np.array([[0.0, 0.1], [0.0, 0.1], [0.0, 0.0]])
     np.testing.assert_allclose(metrics.deposit_error(pred, true, 0.1),
                                0.1 / np.sqrt(2), atol=1e-12)
+
+  def test_solid_distance_by_hand(self):
+    points = np.stack([on_ramp(0.3, 0.01), on_ramp(0.3, -0.002),
+                       [0.1, 0.075 + 0.05]])   # 2 cm above the semicircle
+    np.testing.assert_allclose(metrics.solid_distance(points, SCENE),
+                               [-0.01, 0.002, 0.02], atol=1e-6)
+
+  def test_inside_solids_by_hand(self):
+    frame0 = np.stack([
+        on_ramp(0.3, -0.01),        # 1 cm above the ramp: free
+        on_ramp(0.3, 0.001),        # 1 mm in the ramp
+        on_ramp(0.35, 0.01),        # 1 cm in the ramp
+        [0.1, 0.075 + 0.01],        # 2 cm deep in the semicircle
+    ])
+    frame1 = frame0 + np.array([0.0, 0.2])    # all free
+    positions = np.stack([frame0, frame1])
+    # Default tolerance: half the spacing, 5 mm.
+    np.testing.assert_allclose(metrics.inside_solids(positions, SCENE),
+                               [0.5, 0.0])
+    np.testing.assert_allclose(
+        metrics.inside_solids(positions, SCENE, tolerance=5e-4), [0.75, 0.0])
+    np.testing.assert_allclose(
+        metrics.inside_solids(positions, SCENE, tolerance=0.015), [0.25, 0.0])
+
+  def test_outside_domain_by_hand(self):
+    # Domain [0, 0.4] x [0, 0.3]; the ramp does not count.
+    frame = np.array([[-0.01, 0.2],     # 1 cm left of the domain
+                      [0.2, 0.301],     # 1 mm above it
+                      [0.41, 0.2],      # 1 cm right of it
+                      [0.3, 0.05]])     # inside the ramp, in the domain
+    positions = np.stack([frame, np.full_like(frame, 0.2)])
+    np.testing.assert_allclose(metrics.outside_domain(positions, SCENE),
+                               [0.5, 0.0])
+    np.testing.assert_allclose(
+        metrics.outside_domain(positions, SCENE, tolerance=5e-4), [0.75, 0.0])
+
+  def test_front_error_relative_by_hand(self):
+    x = np.linspace(1.0, 1.5, 101)
+    start = np.stack([x, np.zeros_like(x)], -1)   # front (1% quantile) 1.005
+    true = start - np.array([0.3, 0.0])           # travelled 0.3 m
+    pred = start - np.array([0.24, 0.0])          # 0.06 m short of it
+    self.assertAlmostEqual(metrics.front_error_relative(pred, true, start),
+                           0.2, places=9)
+    self.assertAlmostEqual(
+        metrics.front_error_relative(true - [0.03, 0.0], true, start), 0.1,
+        places=9)
+    self.assertEqual(metrics.front_error_relative(true, true, start), 0.0)
+
+  def test_constant_velocity_by_hand(self):
+    # x = t^2 at frame t: the velocity changes, the baseline does not.
+    t = np.arange(12.0)
+    positions = np.stack([t**2, -t], -1)[:, None, :]          # [F, 1, 2]
+    # C = 3, k = 2: inputs 0, 2, 4; velocity (16 - 4) / 2 = 6 per frame.
+    got = metrics.constant_velocity(positions, np.array([6, 8]), 3, 2)
+    np.testing.assert_allclose(got[:, 0], [[16 + 12, -6], [16 + 24, -8]])
+    # C = 3, k = 1: inputs 0, 1, 2; velocity 4 - 1 = 3.
+    got = metrics.constant_velocity(positions, np.array([3, 4, 5]), 3)
+    self.assertEqual(got.shape, (3, 1, 2))
+    np.testing.assert_allclose(got[:, 0], [[7, -3], [10, -4], [13, -5]])
 
 
 if __name__ == "__main__":

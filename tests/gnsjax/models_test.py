@@ -9,13 +9,15 @@ import numpy as np
 from gnsjax import features
 from gnsjax import models
 from gnsjax import noise
+from mpm import geometry
 
 N, E = 40, 200
 
 
 def _inputs(seed=0, n=N, e=E):
   rng = np.random.default_rng(seed)
-  return (jnp.asarray(rng.normal(size=(n, 14)), jnp.float32),
+  return (jnp.asarray(rng.normal(size=(n, features.num_node_features(6))),
+                      jnp.float32),
           jnp.asarray(rng.integers(0, 9, n), jnp.int32),
           jnp.asarray(rng.normal(size=(e, 3)), jnp.float32),
           jnp.asarray(rng.integers(0, n, e), jnp.int32),
@@ -96,19 +98,30 @@ class FeaturesTest(absltest.TestCase):
                                 jnp.array([0.0, -1.0]), jnp.array([0.5, 0.25]))
 
   def test_node_features_by_hand(self):
-    # Two particles, 3 frames: velocities (1, 0), (2, 1) and (0, 0), (0, 0).
-    positions = jnp.array([[[0.5, 0.5], [0.2, 0.9]],
-                           [[1.5, 0.5], [0.2, 0.9]],
-                           [[3.5, 1.5], [0.2, 0.9]]])
-    bounds = jnp.array([[0.0, 4.0], [0.0, 1.0]])
-    got = np.asarray(features.node_features(positions, self.stats, bounds,
+    # Three particles, 3 frames: velocities (1, 0), (2, 1); (0, 0), (0, 0);
+    # (0, 0), (0, 0).
+    positions = jnp.array([[[0.5, 0.5], [0.2, 0.9], [1.0, 1.0]],
+                           [[1.5, 0.5], [0.2, 0.9], [1.0, 1.0]],
+                           [[3.5, 1.5], [0.2, 0.9], [1.0, 1.0]]])
+    # A linear SDF on a 0.5 m grid (bilinear interpolation is exact):
+    # phi = 0.6 x - 0.8 y + 0.3, outward normal (0.6, -0.8).
+    x, y = np.meshgrid(np.arange(9) * 0.5, np.arange(5) * 0.5, indexing="ij")
+    values = np.stack([0.6 * x - 0.8 * y + 0.3, np.full_like(x, 0.6),
+                       np.full_like(x, -0.8)], -1)
+    solids = geometry.SDFGrid(jnp.asarray(values, jnp.float32), 0.5)
+    got = np.asarray(features.node_features(positions, self.stats, solids,
                                             radius=0.5))
+    self.assertEqual(got.shape, (3, features.num_node_features(3)))
     v0 = [(1 - 0.1) / 2, (0 + 0.2) / 4, (2 - 0.1) / 2, (1 + 0.2) / 4]
     v1 = [(0 - 0.1) / 2, (0 + 0.2) / 4] * 2
-    # Walls of particle 0 at (3.5, 1.5): x-0=7, 4-x=1, y-0=3, 1-y=-1 (/R=.5).
-    w0 = [1.0, 1.0, 1.0, -1.0]
-    w1 = [0.4, 1.0, 1.0, 0.2]
-    np.testing.assert_allclose(got, [v0 + w0, v1 + w1], atol=1e-6)
+    # phi / R clipped to [-1, 1], then the normal times clip(1 - phi / R):
+    # (3.5, 1.5): phi = 1.2, far (2.4 R): clipped to 1, no normal.
+    # (0.2, 0.9): phi = -0.3 (inside, -0.6 R): weight 1.6 -> 1.
+    # (1.0, 1.0): phi = 0.1 (0.2 R): weight 0.8.
+    s0 = [1.0, 0.0, 0.0]
+    s1 = [-0.6, 0.6, -0.8]
+    s2 = [0.2, 0.8 * 0.6, 0.8 * -0.8]
+    np.testing.assert_allclose(got, [v0 + s0, v1 + s1, v1 + s2], atol=1e-6)
 
   def test_edge_features_by_hand(self):
     position = jnp.array([[0.0, 0.0], [0.3, 0.4]])
@@ -116,6 +129,23 @@ class FeaturesTest(absltest.TestCase):
                                  jnp.array([0, 0]), radius=0.5)
     np.testing.assert_allclose(got, [[0.6, 0.8, 1.0], [0.0, 0.0, 0.0]],
                                atol=1e-6)
+
+  def test_fold_noise_by_hand(self):
+    # Stds grow to sqrt(std^2 + 3^2); means stay.
+    folded = features.fold_noise(self.stats, 3.0)
+    np.testing.assert_allclose(folded.vel_std, [np.sqrt(13.0), 5.0],
+                               rtol=1e-6)
+    np.testing.assert_allclose(folded.acc_std, [np.sqrt(9.25),
+                                                np.sqrt(9.0625)], rtol=1e-6)
+    np.testing.assert_array_equal(folded.vel_mean, self.stats.vel_mean)
+    np.testing.assert_array_equal(folded.acc_mean, self.stats.acc_mean)
+    unchanged = features.fold_noise(self.stats, 0.0)
+    for a, b in zip(unchanged, self.stats):
+      np.testing.assert_allclose(a, b, rtol=1e-7)
+    # Works on host statistics too (``Problem.stats`` are numpy).
+    host = features.Stats(*(np.asarray(a) for a in self.stats))
+    np.testing.assert_allclose(features.fold_noise(host, 3.0).vel_std,
+                               folded.vel_std, rtol=1e-6)
 
   def test_integrate_inverts_target_acceleration(self):
     rng = np.random.default_rng(0)
