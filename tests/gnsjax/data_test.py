@@ -7,12 +7,38 @@ from absl.testing import absltest
 import h5py
 import numpy as np
 
+import mpm
 from gnsjax import data
 from mpm import dataset
 from mpm import io as mpm_io
 
 SPEC = dataset.DatasetSpec(num_train=2, num_test=2, num_frames=10, seed=3,
                            spacing=0.01, connectivity_radius=0.03)
+
+
+def numpy_stats(trajectories, k):
+  """Mean and std of the stride-k velocities and accelerations, every frame
+  of every particle of every trajectory pooled (plain numpy)."""
+  v = np.concatenate([(x[k:] - x[:-k]).reshape(-1, 2)
+                      for x in trajectories]).astype(np.float64)
+  a = np.concatenate([(x[2 * k:] - 2 * x[k:-k] + x[:-2 * k]).reshape(-1, 2)
+                      for x in trajectories]).astype(np.float64)
+  return v.mean(0), v.std(0), a.mean(0), a.std(0)
+
+
+def write_moving_and_resting(path, frames=12, n=5):
+  """A file of two synthetic trajectories: sand sliding at 1 mm per frame,
+  then sand at rest."""
+  t = np.arange(frames, dtype=np.float32)[:, None, None]
+  start = np.stack([np.linspace(0.5, 0.6, n), np.full(n, 0.5)],
+                   -1).astype(np.float32)
+  moving = start[None] + t * np.array([-1e-3, 0.0], np.float32)
+  resting = np.broadcast_to(start[None], moving.shape)
+  scene = mpm.Scene.from_dict({"name": "synthetic"})
+  mpm_io.write_trajectories(path, [
+      mpm_io.Trajectory(np.ascontiguousarray(x), np.zeros((0, 2), np.float32),
+                        np.zeros(0, np.int32), scene)
+      for x in (moving, resting)])
 
 
 class DataTest(absltest.TestCase):
@@ -75,9 +101,93 @@ class DataTest(absltest.TestCase):
       with self.assertRaisesRegex(mpm_io.FormatError, "no valid split"):
         data.split_path(d, "valid")
 
+  def test_stride_windows_are_the_subsampled_trajectory(self):
+    trajectories = list(mpm_io.read_trajectories(self.train))
+    for c, k in ((2, 3), (3, 3), (2, 4)):
+      with data.WindowDataset(self.train, input_frames=c, frame_stride=k,
+                              seed=0) as ds:
+        per_trajectory = [len(t.positions) - c * k for t in trajectories]
+        self.assertLen(ds, sum(per_trajectory))
+        seen = set()
+        for i in range(len(ds)):
+          w = ds[i]
+          seen.add((w.trajectory, w.start))
+          x = trajectories[w.trajectory].positions
+          self.assertEqual(w.positions.shape, (c + 1,) + x.shape[1:])
+          np.testing.assert_array_equal(
+              w.positions, x[w.start:w.start + c * k + 1:k])
+          self.assertEqual(w.scene, trajectories[w.trajectory].scene)
+        self.assertLen(seen, len(ds))
+    with self.assertRaisesRegex(ValueError, "frame_stride"):
+      data.WindowDataset(self.train, frame_stride=0)
+
+  def test_stats_at_a_stride_are_numpy_stats_of_its_differences(self):
+    positions = [t.positions for t in mpm_io.read_trajectories(self.train)]
+    header = mpm_io.read_header(self.train)
+    # Stride 1: what the file stores, which is the numpy statistics.
+    stored = data.load_stats(self.train, 1)
+    for got, key, want in zip(stored, data.Stats._fields,
+                              numpy_stats(positions, 1)):
+      self.assertEqual(got.dtype, np.float32)
+      np.testing.assert_allclose(got, header[key], rtol=1e-6, err_msg=key)
+      np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-9,
+                                 err_msg=key)
+    strided = data.load_stats(self.train, 3)
+    for got, key, want in zip(strided, data.Stats._fields,
+                              numpy_stats(positions, 3)):
+      np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-9,
+                                 err_msg=key)
+    # Three frames per step: velocities about 3x those of one frame.
+    self.assertGreater(np.max(strided.vel_std / stored.vel_std), 2)
+    with self.assertRaisesRegex(ValueError, "stride"):
+      data.load_stats(self.train, 0)
+
+  def test_uniform_order_is_a_permutation(self):
+    with data.WindowDataset(self.train, input_frames=3, seed=4,
+                            motion_weighting=0.0) as ds:
+      flat = lambda w: (w.trajectory, w.start)
+      for epoch in range(2):
+        seen = [flat(ds[k]) for k in range(epoch * len(ds),
+                                           (epoch + 1) * len(ds))]
+        self.assertLen(set(seen), len(ds))
+
+  def test_motion_weighting_draws_resting_sand_less(self):
+    with tempfile.TemporaryDirectory() as d:
+      path = os.path.join(d, "two.h5")
+      write_moving_and_resting(path)
+      counts = {}
+      for p in (0.0, 0.5, 1.0):
+        with data.WindowDataset(path, input_frames=3, seed=0,
+                                motion_weighting=p) as ds:
+          self.assertLen(ds, 2 * (12 - 3))
+          drawn = [ds[k].trajectory for k in range(20 * len(ds))]
+        counts[p] = np.bincount(drawn, minlength=2)
+      # Uniform: as many of each; p: weights (1 - p) + p m / mean(m), i.e.
+      # 1 - p for the resting windows and 1 + p for the moving ones.
+      self.assertEqual(counts[0.0][0], counts[0.0][1])
+      self.assertEqual(counts[1.0][1], 0)
+      self.assertGreater(counts[0.5][1], 0)
+      np.testing.assert_allclose(counts[0.5][1] / counts[0.5].sum(), 0.25,
+                                 atol=0.06)
+      # A pure function of (seed, index): a fresh dataset, read in another
+      # order, draws the same windows.
+      with data.WindowDataset(path, input_frames=3, seed=0,
+                              motion_weighting=0.5) as a, \
+          data.WindowDataset(path, input_frames=3, seed=0,
+                             motion_weighting=0.5) as b:
+        ks = list(range(3 * len(a)))
+        first = [(a[k].trajectory, a[k].start) for k in ks]
+        again = {k: (b[k].trajectory, b[k].start) for k in reversed(ks)}
+        self.assertEqual(first, [again[k] for k in ks])
+      with self.assertRaisesRegex(ValueError, "motion_weighting"):
+        data.WindowDataset(path, motion_weighting=1.5)
+
   def test_too_short_for_windows(self):
     with self.assertRaisesRegex(mpm_io.FormatError, "at least 11 frames"):
       data.WindowDataset(self.train, input_frames=10)
+    with self.assertRaisesRegex(mpm_io.FormatError,
+                                "at least 13 frames.*stride 2"):
+      data.WindowDataset(self.train, input_frames=6, frame_stride=2)
 
 
 if __name__ == "__main__":
