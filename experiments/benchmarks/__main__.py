@@ -27,9 +27,10 @@ from experiments.benchmarks import dataset_benchmark
 from experiments.benchmarks import design_benchmark
 from experiments.benchmarks import gns_benchmark
 from experiments.benchmarks import gns_inputs
+from experiments.benchmarks import input_benchmark
 from experiments.benchmarks import mpm_benchmark
 
-BENCHMARKS = ("mpm", "gns", "dataset", "design")
+BENCHMARKS = ("mpm", "gns", "dataset", "design", "input")
 
 _OUT = flags.DEFINE_string("out", "docs/benchmarks",
                            "Directory for the JSON and Markdown results.")
@@ -50,7 +51,8 @@ _SAND_BLOCK_DIR = flags.DEFINE_string(
     f"{gns_inputs.SAND_BLOCK_NPZ} and {gns_inputs.SAND_BLOCK_METADATA} "
     f"(and the {gns_inputs.SAND_BLOCK_README} quoting the peers' times).")
 _READ_DATA = flags.DEFINE_string(
-    "read_data", None, "dataset: a dataset directory to time reading on.")
+    "read_data", None, "dataset, input: a dataset directory to time reading "
+    "on (input: required, a dataset of the small config).")
 
 
 def _check_what(value: list[str]) -> bool:
@@ -83,10 +85,14 @@ def check_inputs(what: list[str]) -> None:
     except FileNotFoundError as e:
       raise app.UsageError(f"--sand_block_dir={_SAND_BLOCK_DIR.value}: "
                            f"{e}") from e
+  if "input" in what and _READ_DATA.value is None:
+    raise app.UsageError("--read_data is required with --what=input: a "
+                         "dataset directory of the small config")
   if _READ_DATA.value is not None:
-    if "dataset" not in what:
+    if "dataset" not in what and "input" not in what:
       raise app.UsageError(f"--read_data={_READ_DATA.value}: only used by "
-                           f"--what=dataset (got --what={','.join(what)})")
+                           "--what=dataset or input (got "
+                           f"--what={','.join(what)})")
     if not os.path.isdir(_READ_DATA.value):
       raise app.UsageError(f"--read_data={_READ_DATA.value}: not a "
                            "directory (a dataset written by "
@@ -112,6 +118,8 @@ def main(argv):
           cache=runtime.enable_compilation_cache(), log=logging.info),
       "design": lambda: design_benchmark.run_benchmark(
           out, quick=quick, log=logging.info),
+      "input": lambda: input_benchmark.run_benchmark(
+          _READ_DATA.value, out, quick=quick),
   }
   for name in BENCHMARKS:
     if name in what:

@@ -51,6 +51,12 @@ class FlagsTest(absltest.TestCase):
       with self.assertRaisesRegex(app.UsageError, "only used by"):
         benchmarks_main.main(["benchmarks"])
 
+  def test_input_needs_read_data(self):
+    with flagsaver.flagsaver(what=["input"], read_data=None):
+      with self.assertRaisesRegex(app.UsageError,
+                                  "--read_data is required with --what=input"):
+        benchmarks_main.main(["benchmarks"])
+
   def test_unexpected_arguments(self):
     with self.assertRaisesRegex(app.UsageError, "unexpected arguments"):
       benchmarks_main.main(["benchmarks", "mpm"])
