@@ -10,7 +10,6 @@ their scenes' ``frame_dt`` set to match. ``--noproject`` switches the solid
 constraint off (to see what the model alone does).
 """
 
-import os
 
 from absl import app
 from absl import flags

@@ -1,0 +1,155 @@
+"""A trained run as the library uses it: its problem, and loading it.
+
+``Problem`` is what the data and the config fix for a model (statistics at
+its frame stride, the noise folded in or not, domain, radius, graph spec,
+node choice); it is stored with every checkpoint (``Problem.to_dict``), so
+``load_run(workdir)`` restores a model for inference from the checkpoint
+alone: no dataset, no optimiser.
+"""
+
+import dataclasses
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import ml_collections
+import numpy as np
+
+from gnsjax import checkpoint
+from gnsjax import data
+from gnsjax import features
+from gnsjax import graph
+from gnsjax import models
+from gnsjax import simulator
+from mpm import io as mpm_io
+
+
+def create_model(model_config: ml_collections.ConfigDict
+                 ) -> models.EncodeProcessDecode:
+  return models.EncodeProcessDecode(
+      latent_size=model_config.latent_size,
+      hidden_layers=model_config.hidden_layers,
+      num_message_passing_steps=model_config.num_message_passing_steps,
+      type_embedding_size=model_config.type_embedding_size,
+      split_first_layer=model_config.split_first_layer)
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+  """What the data and the config fix for a model (host values).
+
+  Attributes:
+    stats: normalisation statistics per learned step, the training noise
+      folded in if the run was trained so (what the model divides by).
+    bounds: [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m).
+    radius: connectivity radius R (m).
+    spec: the radius graph's static description.
+    input_frames: C.
+    frame_stride: k, stored frames per learned step.
+    boundary_particles: whether boundary particles are graph nodes.
+    sdf_spacing: node spacing of the scenes' SDF grids (m).
+    noise_std: training noise, std of the last input velocity (m/step).
+  """
+  stats: features.Stats
+  bounds: np.ndarray
+  radius: float
+  spec: graph.GraphSpec
+  input_frames: int = 6
+  frame_stride: int = 1
+  boundary_particles: bool = True
+  sdf_spacing: float = 0.005
+  noise_std: float = 0.0
+
+  @property
+  def context(self) -> simulator.Context:
+    return simulator.Context(
+        features.Stats(*(jnp.asarray(s) for s in self.stats)),
+        jnp.asarray(self.bounds, jnp.float32))
+
+  def to_dict(self) -> dict:
+    """JSON-able record, stored with every checkpoint (``from_dict``)."""
+    return {**{k: np.asarray(v).tolist()
+               for k, v in self.stats._asdict().items()},
+            "bounds": np.asarray(self.bounds).tolist(), "radius": self.radius,
+            "noise_std": self.noise_std}
+
+
+def _problem(config, stats: features.Stats, bounds, radius: float,
+             noise_std: float) -> Problem:
+  bounds = np.asarray(bounds, np.float32)
+  spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
+                         config.train.capacity_multiplier)
+  m = config.model
+  return Problem(stats, bounds, radius, spec, config.train.input_frames,
+                 config.train.frame_stride, m.boundary_particles,
+                 float(m.sdf_spacing or radius / 6), float(noise_std))
+
+
+def problem_from_dict(config, stored: dict) -> Problem:
+  """The problem a checkpoint was trained on (``Problem.to_dict``)."""
+  stats = features.Stats(*(np.asarray(stored[k], np.float32)
+                           for k in features.Stats._fields))
+  return _problem(config, stats, stored["bounds"], float(stored["radius"]),
+                  float(stored["noise_std"]))
+
+
+def noise_std_of(train_config, stats: features.Stats) -> float:
+  """The training noise (m/step): ``noise_velocity_fraction`` times the RMS
+  velocity std of the data at the run's stride, or ``noise_std``."""
+  fraction = train_config.noise_velocity_fraction
+  if fraction:
+    return float(fraction * np.sqrt(np.mean(np.square(stats.vel_std))))
+  return float(train_config.noise_std)
+
+
+def load_problem(data_dir: str, config) -> Problem:
+  """The problem of a dataset: statistics at the config's frame stride (the
+  noise folded in if ``train.fold_noise``), domain and radius (the model
+  config's radius, if set, wins)."""
+  train_path = data.split_path(data_dir, "train")
+  stats = data.load_stats(train_path, config.train.frame_stride)
+  header = mpm_io.read_header(train_path)
+  noise_std = noise_std_of(config.train, stats)
+  if config.train.fold_noise:
+    stats = features.fold_noise(stats, noise_std)
+  radius = float(config.model.connectivity_radius or
+                 header["connectivity_radius"])
+  return _problem(config, stats, header["bounds"], radius, noise_std)
+
+
+class Run(NamedTuple):
+  """A trained model, ready for inference (no optimiser).
+
+  Attributes:
+    model: the network; params: its parameters.
+    problem: statistics, graph and feature settings it was trained with.
+    step: the checkpoint's training step; config: the run's config.
+  """
+  model: models.EncodeProcessDecode
+  params: Any
+  problem: Problem
+  step: int
+  config: ml_collections.ConfigDict
+
+
+def load_run(workdir: str, step: int | None = None) -> Run:
+  """A run's checkpoint (default: the latest), restored on its own.
+
+  Every checkpoint stores its config and its problem (statistics, domain,
+  radius), so a work directory, or a shipped model such as
+  ``experiments/pretrained/small``, needs no dataset to restore.
+  """
+  mngr = checkpoint.manager(workdir, every_steps=1)
+  step = mngr.latest_step() if step is None else step
+  if step is None:
+    mngr.close()
+    raise FileNotFoundError(f"{workdir}: no checkpoint to restore")
+  config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
+  problem = problem_from_dict(config, checkpoint.read_stats(mngr, step))
+  model = create_model(config.model)
+  abstract = models.init_params(
+      model, jax.random.key(0),
+      features.num_node_features(config.train.input_frames))
+  params = checkpoint.restore_params(mngr, abstract, step)
+  mngr.close()
+  return Run(model, params, problem, int(step), config)
