@@ -4,15 +4,22 @@ Modules (import them directly; importing ``gnsjax`` loads nothing heavy):
 
 - ``gnsjax.data``: training windows and trajectories from dataset files.
 - ``gnsjax.graph``: radius graphs from jax-md neighbour lists.
-- ``gnsjax.features``, ``gnsjax.noise``: model inputs, targets, training noise.
+- ``gnsjax.batching``: padded training batches, on the host or gathered on
+  the device (``DeviceWindows``).
+- ``gnsjax.features``, ``gnsjax.noise``: model inputs (velocities and the
+  scene's signed distance field), targets, training noise.
 - ``gnsjax.models``: the encode-process-decode network (Flax + jraph).
-- ``gnsjax.simulator``, ``gnsjax.rollout``: one step, and rollouts under scan.
+- ``gnsjax.simulator``, ``gnsjax.rollout``: one step with the solid
+  constraint, and the one rollout engine (``rollout.unroll``) under scan.
 - ``gnsjax.train``, ``gnsjax.checkpoint``: training with optax and orbax.
-- ``gnsjax.metrics``, ``gnsjax.evaluate``: the paper's evaluation.
+- ``gnsjax.run``: a trained run's problem, and ``load_run`` for inference.
+- ``gnsjax.metrics``: accuracy and flow checks (positional MSE, front,
+  deposit, sand inside solids or outside the domain).
 - ``gnsjax.design``: inverse design of an obstacle's placement by gradients
   through the GNS or the MPM (a package: placement, objectives, rollouts,
   optimize, study).
 
-Pictures are drawn in ``experiments.figures``; npz datasets of DeepMind's and
+The paper's evaluation is ``experiments.evaluation``; pictures are drawn in
+``experiments.figures``; npz datasets of DeepMind's and
 geoelements' GNS are read and written by ``mpm.interop``.
 """
