@@ -19,7 +19,10 @@ _VARIANTS = flags.DEFINE_list(
     "variants", None, "Variants to run (default: all): "
     + ", ".join(name for name, _ in tasks.ABLATION))
 _MAX = flags.DEFINE_integer("max_trajectories", 7,
-                            "Test trajectories per variant (7: one per group).")
+                            "Test trajectories per variant (7: one per group).",
+                            lower_bound=1)
+_UNCONSTRAINED = flags.DEFINE_bool(
+    "unconstrained", False, "Also roll out without the solid constraint.")
 
 
 def main(argv):
@@ -29,7 +32,8 @@ def main(argv):
   runtime.enable_compilation_cache()
   rows = tasks.ablation(_DATA.value, _OUT.value, minutes=_MINUTES.value,
                         variants=_VARIANTS.value,
-                        max_trajectories=_MAX.value)
+                        max_trajectories=_MAX.value,
+                        unconstrained=_UNCONSTRAINED.value)
   print(tasks.ablation_table(rows))
 
 
