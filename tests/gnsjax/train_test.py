@@ -1,28 +1,45 @@
 """Tests for `gnsjax.train` and `gnsjax.checkpoint`."""
 
 import csv
+import dataclasses
 import os
 import signal
 import subprocess
 import sys
 import tempfile
 import time
+import unittest
 
 from absl.testing import absltest
 import jax
 import numpy as np
 
 from gnsjax import checkpoint
+from gnsjax import data
+from gnsjax import features
+from gnsjax import rollout
+from gnsjax import simulator
 from gnsjax import train
+from mpm import geometry
 from mpm import io as mpm_io
 from tests.gnsjax import fixtures
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))
+# The suite's compilation cache (tests/conftest.py), for the subprocesses.
+CACHE = os.path.join(ROOT, ".jax_cache")
 
 
 def _losses(workdir):
   with open(os.path.join(workdir, "metrics.csv"), newline="") as f:
     return {int(r["step"]): float(r["loss"]) for r in csv.DictReader(f)}
+
+
+def assert_same_problem(test, got: train.Problem, want: train.Problem):
+  for a, b in zip(got.stats, want.stats):
+    np.testing.assert_allclose(a, b, rtol=1e-6)
+  np.testing.assert_allclose(got.bounds, want.bounds, rtol=1e-6)
+  test.assertEqual(dataclasses.replace(got, stats=None, bounds=None),
+                   dataclasses.replace(want, stats=None, bounds=None))
 
 
 class TrainTest(absltest.TestCase):
@@ -68,6 +85,27 @@ class TrainTest(absltest.TestCase):
     raw = lambda s: s.replace(key=jax.random.key_data(s.key))
     jax.tree.map(np.testing.assert_array_equal, raw(state), raw(again))
     mngr.close()
+    # The run restored for inference alone: the same parameters and
+    # problem, so the same predictions.
+    run = train.load_run(self.dir, step=5)
+    self.assertEqual(run.step, 5)
+    self.assertEqual(run.config.model.to_dict(), config.model.to_dict())
+    jax.tree.map(np.testing.assert_array_equal, run.params, state.params)
+    for got, want in zip(run.problem.stats, problem.stats):
+      np.testing.assert_allclose(got, want, rtol=1e-6)
+    assert_same_problem(self, run.problem, problem)
+    with data.WindowDataset(data.split_path(self.data, "test"),
+                            frame_stride=problem.frame_stride) as ds:
+      batch = trainer.make_batch([ds[0], ds[1]])
+    graphs, _ = trainer.batch_arrays(batch, None, noise=False)
+    predict = lambda model, params: jax.vmap(
+        lambda g: simulator.predict(model, params, g, run.problem.context,
+                                    run.problem.radius))(graphs)
+    np.testing.assert_array_equal(predict(run.model, run.params),
+                                  predict(trainer.model, state.params))
+    self.assertEqual(train.load_run(self.dir).step, 6)
+    with self.assertRaisesRegex(FileNotFoundError, "no checkpoint"):
+      train.load_run(os.path.join(self.dir, "empty"))
 
   def test_resume_equals_uninterrupted(self):
     config = fixtures.tiny_config(num_steps=12)
@@ -79,13 +117,18 @@ class TrainTest(absltest.TestCase):
     killed = os.path.join(self.dir, "killed")
     script = (
         "import sys\n"
+        "import jax\n"
+        "from experiments import runtime\n"
+        "runtime.enable_compilation_cache()\n"
+        "jax.config.update('jax_persistent_cache_min_compile_time_secs', 0)\n"
         "from tests.gnsjax import fixtures\n"
         "from gnsjax import train\n"
         "config = fixtures.tiny_config(num_steps=100000)\n"
         "config.log_every = 1\n"
         "config.checkpoint.every_steps = 4\n"
         "train.train_and_evaluate(config, sys.argv[1], sys.argv[2])\n")
-    env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
+    env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
+               GNSJAX_CACHE_DIR=CACHE)
     proc = subprocess.Popen([sys.executable, "-c", script, self.data, killed],
                             env=env, cwd=ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -132,6 +175,128 @@ class TrainTest(absltest.TestCase):
       train.train_and_evaluate(config, nostats, os.path.join(self.dir, "x"))
 
 
+class ProblemTest(absltest.TestCase):
+  """The statistics, noise and settings a run is trained with."""
+
+  STATS = features.Stats(np.array([1e-4, -2e-4], np.float32),
+                         np.array([3e-4, 4e-4], np.float32),
+                         np.array([0.0, -1e-5], np.float32),
+                         np.array([2e-5, 1e-5], np.float32))
+
+  def test_noise_std_of(self):
+    config = fixtures.tiny_config(noise_std=3e-4)
+    self.assertEqual(train.noise_std_of(config.train, self.STATS), 3e-4)
+    # A fraction of the RMS velocity std: 0.1 sqrt((3^2 + 4^2) / 2) 1e-4.
+    config.train.noise_velocity_fraction = 0.1
+    np.testing.assert_allclose(train.noise_std_of(config.train, self.STATS),
+                               0.1 * np.sqrt(12.5) * 1e-4, rtol=1e-6)
+
+  def test_load_problem_folds_the_noise_at_the_stride(self):
+    path = fixtures.tiny_dataset()
+    config = fixtures.tiny_config(frame_stride=2, noise_velocity_fraction=0.2,
+                                  fold_noise=True)
+    problem = train.load_problem(path, config)
+    raw = data.load_stats(data.split_path(path, "train"), 2)
+    noise = train.noise_std_of(config.train, raw)
+    np.testing.assert_allclose(
+        noise, 0.2 * np.sqrt(np.mean(np.square(raw.vel_std))), rtol=1e-6)
+    self.assertAlmostEqual(problem.noise_std, noise, places=12)
+    for got, want in zip(problem.stats, features.fold_noise(raw, noise)):
+      np.testing.assert_allclose(got, want, rtol=1e-6)
+    self.assertEqual(problem.frame_stride, 2)
+    self.assertEqual(problem.input_frames, config.train.input_frames)
+    # sdf_spacing None: R / 6.
+    self.assertAlmostEqual(problem.sdf_spacing, problem.radius / 6)
+    # Without folding: the raw statistics, the same noise.
+    config.train.fold_noise = False
+    plain = train.load_problem(path, config)
+    for got, want in zip(plain.stats, raw):
+      np.testing.assert_array_equal(got, want)
+    # The checkpoint's record restores the problem.
+    assert_same_problem(self, train.problem_from_dict(config,
+                                                      problem.to_dict()),
+                        problem)
+
+  def test_bad_recipe_settings_are_refused(self):
+    for key, value, message in [
+        ("frame_stride", 0, "frame_stride = 0"),
+        ("pushforward_steps", -1, "pushforward_steps = -1"),
+        ("pushforward_probability", 1.5, "pushforward_probability = 1.5"),
+        ("motion_weighting", 2.0, "motion_weighting = 2.0")]:
+      with self.assertRaisesRegex(ValueError, message):
+        train.check_config(fixtures.tiny_config(**{key: value}))
+
+
+class PushforwardTest(absltest.TestCase):
+
+  P = 2
+
+  def setUp(self):
+    super().setUp()
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    self.dir = tmp.name
+    self.data = fixtures.tiny_dataset()
+
+  # Library bug, reported: train_and_evaluate reads windows of C + P + 1
+  # frames whenever pushforward_steps = P > 0, even at probability 0, so the
+  # window stream (and the losses) differ from P = 0.
+  @unittest.expectedFailure
+  def test_probability_zero_changes_nothing(self):
+    losses = {}
+    for steps in (0, self.P):
+      config = fixtures.tiny_config(num_steps=3, pushforward_steps=steps,
+                                    pushforward_probability=0.0)
+      config.log_every = 1
+      workdir = os.path.join(self.dir, str(steps))
+      train.train_and_evaluate(config, self.data, workdir)
+      losses[steps] = _losses(workdir)
+    self.assertEqual(sorted(losses[0]), [1, 2, 3])
+    for step in (1, 2, 3):
+      np.testing.assert_allclose(losses[self.P][step], losses[0][step],
+                                 rtol=1e-6, err_msg=f"step {step}")
+
+  def test_inputs_are_the_models_own_rollout(self):
+    p = self.P
+    config = fixtures.tiny_config(pushforward_steps=p,
+                                  pushforward_probability=1.0)
+    problem = train.load_problem(self.data, config)
+    c = problem.input_frames
+    trainer = train.Trainer(config, problem)
+    state = trainer.init_state(0)
+    with data.WindowDataset(data.split_path(self.data, "train"),
+                            input_frames=c + p, seed=0) as ds:
+      batch = trainer.make_batch([ds[0], ds[1]])
+    self.assertEqual(batch.positions.shape[1], c + p + 1)
+    graphs, target = trainer.batch_arrays(batch, None, noise=False,
+                                          params=state.params, pushforward=p)
+    inputs, target = np.asarray(graphs.positions), np.asarray(target)
+    moving = batch.moving
+    # The target is the true frame P steps after the first C.
+    np.testing.assert_array_equal(target, batch.positions[:, c + p])
+    # The inputs: the true frames P to C - 2, then what a rollout of the
+    # model from the first C frames carries after P steps.
+    np.testing.assert_array_equal(inputs[:, :c - p - 1],
+                                  batch.positions[:, p:c - 1])
+    self.assertGreater(np.max(np.abs(inputs[:, -1][moving] -
+                                     batch.positions[:, c + p - 1][moving])),
+                       1e-7)
+    for b in range(len(inputs)):
+      scene = rollout.SceneNodes(
+          batch.positions[b, :c], batch.particle_type[b], moving[b],
+          geometry.SDFGrid(batch.solids[b], problem.sdf_spacing))
+      own = rollout.rollout(simulator.ModelPredictor(trainer.model),
+                            state.params, scene, p, problem.context,
+                            problem.spec)
+      np.testing.assert_allclose(inputs[b, -1], own.positions[-1], atol=1e-6)
+      np.testing.assert_allclose(inputs[b, -2][moving[b]],
+                                 own.positions[-2][moving[b]], atol=1e-5)
+    # Without pushforward the same batch gives its last C + 1 frames.
+    graphs, target = trainer.batch_arrays(batch, None, noise=False)
+    np.testing.assert_array_equal(graphs.positions, batch.positions[:, p:-1])
+    np.testing.assert_array_equal(target, batch.positions[:, -1])
+
+
 class DataParallelTest(absltest.TestCase):
 
   def test_two_devices_match_one(self):
@@ -139,6 +304,9 @@ class DataParallelTest(absltest.TestCase):
     script = (
         "import csv, json, sys\n"
         "import jax\n"
+        "from experiments import runtime\n"
+        "runtime.enable_compilation_cache()\n"
+        "jax.config.update('jax_persistent_cache_min_compile_time_secs', 0)\n"
         "from tests.gnsjax import fixtures\n"
         "from gnsjax import train\n"
         "config = fixtures.tiny_config(num_steps=4, batch_size=2)\n"
@@ -149,6 +317,7 @@ class DataParallelTest(absltest.TestCase):
     with tempfile.TemporaryDirectory() as d:
       for devices in (1, 2):
         env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
+                   GNSJAX_CACHE_DIR=CACHE,
                    XLA_FLAGS=f"--xla_force_host_platform_device_count="
                    f"{devices}")
         workdir = os.path.join(d, str(devices))
