@@ -398,7 +398,10 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   mpm_io.write_json(os.path.join(workdir, "config.json"), config_dict)
   mpm_io.write_json(os.path.join(workdir, "stats.json"), problem.to_dict())
 
-  pushforward = tcfg.pushforward_steps
+  # At probability 0 pushforward is off: the windows (and so the stream of
+  # examples and the losses) are those of a run without it.
+  pushforward = (tcfg.pushforward_steps if tcfg.pushforward_probability > 0
+                 else 0)
   dataset = data.WindowDataset(data.split_path(data_dir, "train"),
                                input_frames=tcfg.input_frames + pushforward,
                                seed=tcfg.seed,

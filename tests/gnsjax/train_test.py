@@ -8,7 +8,6 @@ import subprocess
 import sys
 import tempfile
 import time
-import unittest
 
 from absl.testing import absltest
 import jax
@@ -238,10 +237,6 @@ class PushforwardTest(absltest.TestCase):
     self.dir = tmp.name
     self.data = fixtures.tiny_dataset()
 
-  # Library bug, reported: train_and_evaluate reads windows of C + P + 1
-  # frames whenever pushforward_steps = P > 0, even at probability 0, so the
-  # window stream (and the losses) differ from P = 0.
-  @unittest.expectedFailure
   def test_probability_zero_changes_nothing(self):
     losses = {}
     for steps in (0, self.P):
