@@ -1,7 +1,6 @@
 """A small design scene and an untrained GNS for the inverse-design tests."""
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import mpm
@@ -29,22 +28,24 @@ def scene(**overrides) -> mpm.Scene:
 
 
 def tiny_gns(placement: placement_lib.Placement, num_frames: int,
-             window: np.ndarray | None = None) -> rollouts.GNSDriver:
+             window: np.ndarray | None = None, frame_stride: int = 1,
+             boundary: bool = True) -> rollouts.GNSDriver:
   """A GNS driver of an untrained two-step model (random weights); the
   window is the MPM's unless given."""
   model = models.EncodeProcessDecode(latent_size=16, hidden_layers=1,
                                      num_message_passing_steps=2,
                                      type_embedding_size=4)
-  params = model.init(jax.random.key(0), jnp.zeros((4, 2 * (C - 1) + 4)),
-                      jnp.full(4, mpm.SAND_TYPE), jnp.zeros((4, 3)),
-                      jnp.zeros(4, jnp.int32), jnp.zeros(4, jnp.int32))
+  params = models.init_params(model, jax.random.key(0),
+                              features.num_node_features(C))
   bounds = ((0.0, 1.65), (0.0, 1.19))
   stats = features.Stats(np.zeros(2, np.float32), np.full(2, 1e-3, np.float32),
                          np.zeros(2, np.float32), np.full(2, 1e-3, np.float32))
   problem = train.Problem(stats, np.asarray(bounds, np.float32), 0.03,
-                          graph.GraphSpec(0.03, bounds))
+                          graph.GraphSpec(0.03, bounds), input_frames=C,
+                          frame_stride=frame_stride,
+                          boundary_particles=boundary, sdf_spacing=0.005)
   if window is None:
-    window = rollouts.mpm_window(placement.scene, C)
+    window = rollouts.mpm_window(placement.scene, C, frame_stride)
   sim = rollouts.GNSRollout.create(placement, model, problem, window,
                                    num_frames)
   return rollouts.GNSDriver(sim, params)

@@ -14,6 +14,7 @@ from gnsjax.design import objectives
 from gnsjax.design import optimize
 from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
+from mpm import geometry
 from tests.gnsjax.design.fixtures import C
 from tests.gnsjax.design.fixtures import X
 from tests.gnsjax.design.fixtures import scene
@@ -45,15 +46,26 @@ class GradientTest(parameterized.TestCase):
     self._check(rollouts.MPMDriver(rollouts.MPMRollout.create(p)),
                 obj.smooth, X, 3e-4, 0.05)
 
-  def test_gns_gradient_matches_central_differences(self):
+  @parameterized.named_parameters(("boundary_particles", True, 20),
+                                  ("sdf_only", False, 10))
+  def test_gns_gradient_matches_central_differences(self, boundary, frames):
     # The radius graph makes the rollout jump where an edge appears (with a
     # message of full size), so differences across a few mm see jumps that
     # the derivative does not. With the graph held at its first step's edges
-    # the rollout is smooth, and the derivative through the model, the
-    # integration, the remat'd scan and the obstacle's boundary particles
+    # the rollout is smooth but for small jumps of what the model sees of the
+    # solids: a node of the SDF grid between the ramp and the obstacle
+    # changes its normal from one to the other as the obstacle moves, and
+    # the constraint removes a particle's inward velocity only once it is
+    # inside. Measured: differences of 1 mm are 2-4x off, of 0.3 mm within
+    # 2%. Between those, the derivative through the model, the integration,
+    # the remat'd scan, the solid constraint and what the model sees of the
+    # obstacle (its SDF grid, and its boundary particles if they are nodes)
     # must match.
-    p = Placement(scene(num_frames=20))
-    driver = tiny_gns(p, 20)
+    p = Placement(scene(num_frames=frames))
+    driver = tiny_gns(p, frames, boundary=boundary)
+    self.assertLen(driver.sim.types,
+                   driver.sim.n_sand + (len(gns_boundary(driver)) if boundary
+                                        else 0))
     obj = objectives.make("runout")
     loss = lambda q, sim, mp, nb: obj.smooth(rollouts.gns_positions(
         sim, q, mp, nb, update_graph=False)[0])
@@ -61,9 +73,13 @@ class GradientTest(parameterized.TestCase):
     params = {"x": jnp.float32(X)}
     grad = jax.jit(jax.grad(loss))(params, *args)
     fd = optimize.central_difference(
-        lambda q: float(jax.jit(loss)(q, *args)), params, 1e-3)
-    self.assertGreater(abs(float(grad["x"])), 1e-4)
+        lambda q: float(jax.jit(loss)(q, *args)), params, 3e-4)
+    self.assertGreater(abs(float(grad["x"])), 1e-2)
     np.testing.assert_allclose(float(grad["x"]), fd["x"], rtol=0.05)
+
+
+def gns_boundary(driver):
+  return rollouts.gns_boundary(driver.sim, driver.placement.initial())
 
 
 class GNSRolloutTest(absltest.TestCase):
@@ -107,6 +123,34 @@ class GNSRolloutTest(absltest.TestCase):
     self.assertLen(driver.rollout(p.initial()), 12)
     with self.assertRaisesRegex(ValueError, "must exceed the 6 input"):
       tiny_gns(p, C, window=np.repeat(sand[None], C, 0))
+
+  def test_frame_stride_and_sdf_only_nodes(self):
+    p = Placement(scene(num_frames=20))
+    sand = mpm.granular_particles(p.scene)
+    window = np.repeat(sand[None], C, 0)
+    # Stride 2 from frames 0, 2, ..., 10: learned steps to 12, ..., 18.
+    driver = tiny_gns(p, 20, window=window, frame_stride=2, boundary=False)
+    self.assertEqual(driver.sim.n_steps, 4)
+    self.assertLen(driver.sim.types, len(sand))
+    self.assertEqual(gns_boundary(driver).shape, (0, 2))
+    positions = driver.rollout(p.initial())
+    self.assertEqual(positions.shape, (C + 4, len(sand), 2))
+    np.testing.assert_array_equal(positions[:C], window)
+    # The SDF grid follows the obstacle.
+    moved = {"x": jnp.float32(1.0)}
+    np.testing.assert_allclose(
+        rollouts.gns_solids(driver.sim, moved).values,
+        geometry.scene_sdf_grid(p.scene_at(moved), 0.005).values, atol=1e-5)
+    with self.assertRaisesRegex(ValueError, "must exceed the 6 input frames "
+                                "at stride 2"):
+      tiny_gns(p, 11, window=window, frame_stride=2)
+
+  def test_mpm_window_at_a_stride(self):
+    s = scene(num_frames=20)
+    every = rollouts.mpm_window(s, 5)           # frames 0..4
+    strided = rollouts.mpm_window(s, 3, 2)      # frames 0, 2, 4
+    self.assertEqual(strided.dtype, np.float32)
+    np.testing.assert_array_equal(strided, every[::2])
 
   def test_constructors_run_no_simulation(self):
     p = Placement(scene(num_frames=12))
