@@ -292,7 +292,7 @@ class SolidConstraintTest(absltest.TestCase):
     # Sand falling onto a rectangle and a triangle, at the run's SDF spacing:
     # one push along the interpolated normal leaves sand inside near the
     # polygons' corners (the grid's normal and distance blend two faces
-    # there); see solids_test.ConstraintTest.test_corners_and_deep_points.
+    # there); see solids_test.ConstrainTest.test_corners_and_deep_points.
     scene, sand = contact_scene([
         {"shape": "rectangle", "x": 0.8, "width": 0.06, "height": 0.05},
         {"shape": "triangle", "x": 1.0, "base": 0.08, "height": 0.06}])
