@@ -233,8 +233,26 @@ def sdf_grid(ramp: RampParams, obstacles: tuple[ObstacleParams, ...],
 
 def sample_sdf(grid: SDFGrid, p: jax.Array) -> tuple[jax.Array, jax.Array]:
   """Bilinear signed distance [...] (m) and unit outward normal [..., 2] at
-  points ``p`` [..., 2]; points off the grid take its nearest edge's values.
-  Differentiable in ``p`` and in the grid's values."""
+  points ``p`` [..., 2]. Points off the grid (outside the domain) are
+  sampled at the nearest grid point and their distance to it subtracted,
+  with the normal pointing back to it: exact for the domain's walls, so a
+  particle that jumps far out is still pushed back in. Differentiable in
+  ``p`` and in the grid's values."""
+  gx, gy = grid.values.shape[:2]
+  extent = jnp.asarray([(gx - 1) * grid.spacing, (gy - 1) * grid.spacing],
+                       p.dtype)
+  inside = jnp.clip(p, 0.0, extent)
+  out = p - inside
+  out_sq = jnp.sum(out * out, -1)
+  out_dist = jnp.sqrt(jnp.where(out_sq > 0, out_sq, 1.0)) * (out_sq > 0)
+  phi, normal = _bilinear(grid, inside)
+  back = -out / jnp.where(out_dist > 0, out_dist, 1.0)[..., None]
+  normal = jnp.where((out_sq > 0)[..., None], back, normal)
+  return phi - out_dist, normal
+
+
+def _bilinear(grid: SDFGrid, p: jax.Array) -> tuple[jax.Array, jax.Array]:
+  """``sample_sdf`` for points on the grid."""
   gx, gy = grid.values.shape[:2]
   q = p / grid.spacing
   lo = jnp.floor(q)
