@@ -322,14 +322,19 @@ class ConstrainTest(absltest.TestCase):
     after, _ = geometry.sample_sdf(grid(), jnp.asarray(positions))
     np.testing.assert_array_less(-1e-5, np.asarray(after))
 
-  @unittest.expectedFailure  # Library bug, reported: see below.
   def test_sand_outside_the_domain_is_pushed_back(self):
-    # ``geometry.sample_sdf`` clamps points off the grid to its edge, whose
-    # phi is 0 on the walls: sand that left the domain is not seen inside.
-    p = np.array([[-0.01, 0.2], [0.2, HEIGHT + 0.01], [WIDTH + 0.01, 0.25]],
-                 np.float32)
-    positions, _, info = self._constrain(p, p, np.ones(3, bool))
-    self.assertEqual(int(info.count), 3)
+    # Off the grid, sample_sdf subtracts the distance to it (clamping alone
+    # left phi = 0 at the walls: sand that had left was not seen inside).
+    p = np.array([[-0.01, 0.2], [0.2, HEIGHT + 0.01], [WIDTH + 0.01, 0.25],
+                  [WIDTH + 0.02, HEIGHT + 0.02]], np.float32)
+    phi, _ = geometry.sample_sdf(grid(), jnp.asarray(p))
+    np.testing.assert_allclose(phi, [-0.01, -0.01, -0.01, -0.02 * np.sqrt(2)],
+                               atol=1e-6)
+    positions, _, info = self._constrain(p, p, np.ones(len(p), bool))
+    self.assertEqual(int(info.count), len(p))
+    np.testing.assert_allclose(
+        positions, [[0.0, 0.2], [0.2, HEIGHT], [WIDTH, 0.25], [WIDTH, HEIGHT]],
+        atol=1e-6)
     np.testing.assert_array_less(-1e-5, np.asarray(
         geometry.domain_sdf(WIDTH, HEIGHT, jnp.asarray(positions))))
 
