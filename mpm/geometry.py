@@ -239,8 +239,8 @@ def sample_sdf(grid: SDFGrid, p: jax.Array) -> tuple[jax.Array, jax.Array]:
   particle that jumps far out is still pushed back in. Differentiable in
   ``p`` and in the grid's values."""
   gx, gy = grid.values.shape[:2]
-  extent = jnp.asarray([(gx - 1) * grid.spacing, (gy - 1) * grid.spacing],
-                       p.dtype)
+  extent = _lift(jnp.asarray([(gx - 1) * grid.spacing,
+                              (gy - 1) * grid.spacing], p.dtype), p.ndim)
   inside = jnp.clip(p, 0.0, extent)
   out = p - inside
   out_sq = jnp.sum(out * out, -1)

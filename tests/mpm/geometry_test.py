@@ -114,5 +114,23 @@ class BoundaryNodesTest(parameterized.TestCase):
                                rtol=1e-5, atol=1e-8)
 
 
+class SDFGridTest(absltest.TestCase):
+
+  def test_points_far_outside_the_domain_are_pushed_back_in(self):
+    scene = mpm.Scene.from_dict({})
+    grid = mpm.scene_sdf_grid(scene, 0.01)
+    rng = np.random.default_rng(0)
+    w, h = scene.domain.width, scene.domain.height
+    p = rng.uniform([-1.0, -1.0], [w + 1.0, h + 1.0], (500, 2))
+    p = p[geometry.domain_sdf(w, h, p) < -0.02].astype(np.float32)
+    phi, normal = mpm.sample_sdf(grid, jnp.asarray(p))
+    # Outside the box, the distance is at least the distance to the box.
+    np.testing.assert_array_less(np.asarray(phi),
+                                 np.asarray(geometry.domain_sdf(w, h, p))
+                                 + 1e-5)
+    inside = np.asarray(mpm.push_out(jnp.asarray(p), phi, normal))
+    self.assertTrue(np.all(geometry.domain_sdf(w, h, inside) > -1e-5))
+
+
 if __name__ == "__main__":
   absltest.main()
