@@ -8,7 +8,9 @@ import h5py
 import numpy as np
 
 import mpm
+from gnsjax import batching
 from gnsjax import data
+from gnsjax import graph
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -181,6 +183,44 @@ class DataTest(absltest.TestCase):
         self.assertEqual(first, [again[k] for k in ks])
       with self.assertRaisesRegex(ValueError, "motion_weighting"):
         data.WindowDataset(path, motion_weighting=1.5)
+
+  def test_batches_hold_the_windows_nodes_and_sdf_grids(self):
+    spec = graph.GraphSpec(SPEC.connectivity_radius,
+                           np.asarray(mpm_io.read_header(self.train)["bounds"]).tolist())
+    with data.WindowDataset(self.train, input_frames=3, frame_stride=2,
+                            seed=0) as ds:
+      windows = [ds[0], ds[1], ds[2]]
+    for boundary in (True, False):
+      batch = batching.make_batch(windows, spec, node_bucket=32,
+                                  boundary=boundary, sdf_spacing=0.02)
+      b, frames, n, _ = batch.positions.shape
+      self.assertEqual((b, frames), (3, 4))
+      self.assertEqual(n % 32, 0)
+      self.assertEqual(batch.solids.shape[0], 3)
+      for i, w in enumerate(windows):
+        np.testing.assert_array_equal(batch.solids[i],
+                                      data.solids_of(w.scene, 0.02).values)
+        sand = w.positions.shape[1]
+        np.testing.assert_array_equal(batch.positions[i, :, :sand],
+                                      w.positions)
+        np.testing.assert_array_equal(batch.moving[i],
+                                      np.arange(n) < sand)
+        fixed = batch.particle_type[i, sand:] != 0
+        if not boundary:
+          self.assertFalse(fixed.any())
+          continue
+        # The boundary particles within R of the sand's last input frame,
+        # still over all frames.
+        nodes = batch.positions[i, :, sand:][:, fixed]
+        near = batching.near_boundary(w.positions[-2], w.boundary_positions,
+                                      spec.radius)
+        self.assertGreater(near.sum(), 0)
+        self.assertLess(near.sum(), len(near))
+        np.testing.assert_array_equal(nodes[0], w.boundary_positions[near])
+        np.testing.assert_array_equal(nodes, np.broadcast_to(
+            nodes[:1], nodes.shape))
+        d = np.linalg.norm(nodes[0][:, None] - w.positions[-2][None], axis=-1)
+        np.testing.assert_array_less(d.min(1), spec.radius)
 
   def test_too_short_for_windows(self):
     with self.assertRaisesRegex(mpm_io.FormatError, "at least 11 frames"):
