@@ -185,8 +185,8 @@ class DataTest(absltest.TestCase):
         data.WindowDataset(path, motion_weighting=1.5)
 
   def test_batches_hold_the_windows_nodes_and_sdf_grids(self):
-    spec = graph.GraphSpec(SPEC.connectivity_radius,
-                           np.asarray(mpm_io.read_header(self.train)["bounds"]).tolist())
+    bounds = np.asarray(mpm_io.read_header(self.train)["bounds"])
+    spec = graph.GraphSpec(SPEC.connectivity_radius, bounds.tolist())
     with data.WindowDataset(self.train, input_frames=3, frame_stride=2,
                             seed=0) as ds:
       windows = [ds[0], ds[1], ds[2]]
