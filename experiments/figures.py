@@ -2,8 +2,8 @@
 
 - ``animate`` and ``frame_grid``: trajectories as an animation and as a grid
   of frames. Each picture has one or more panels side by side (e.g. MPM and
-  GNS), each a trajectory [T, N, 2] (m) of sand drawn over the scene: the
-  ramp filled below its surface, boundary particles coloured by type.
+  GNS), each a trajectory [T, N, 2] (m) of sand drawn over the scene: ramp
+  and obstacles as filled solids, axes in metres, a legend.
 - ``objective_vs_x``: an inverse-design study's objective against the
   obstacle's x (m), by MPM and GNS sweeps, with the optimiser's path.
 - The evaluation's figures: training curves (the paper's Figs. 3-4), test
@@ -23,28 +23,49 @@ import matplotlib
 matplotlib.use("Agg")
 # pylint: disable=g-import-not-at-top,wrong-import-position
 import matplotlib.animation as animation
+import matplotlib.patches as patches
 import matplotlib.pyplot as plt
 import numpy as np
 
 import mpm
+from mpm import geometry
 
 _SAND = "#1f77b4"
+_RAMP = "#cccccc"
+_OBSTACLE = "#d9a066"
 _TYPE_COLOURS = {mpm.RAMP_TYPE: "#222222", mpm.OBSTACLE_TYPE: "#8c2d04"}
 
 
 def _draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
+  """The ramp and the obstacles as filled solids (from the scene's signed
+  distances), axes in metres; boundary particles, where a model has them,
+  as dots on their surfaces."""
   w, h = scene.domain.width, scene.domain.height
-  x = np.linspace(0, w, 400)
-  ax.fill_between(x, 0, np.minimum(scene.ramp.height(x), h), color="#dddddd",
-                  zorder=0)
+  x, y = np.meshgrid(np.linspace(0, w, 331), np.linspace(0, h, 241))
+  p = np.stack([x, y], axis=-1)
+  ramp = geometry.ramp_params(scene.ramp)
+  ax.contourf(x, y, np.asarray(geometry.ramp_sdf(ramp, p)), levels=[-9, 0],
+              colors=[_RAMP], zorder=0)
+  for o in scene.obstacles:
+    phi = geometry.obstacle_sdf(ramp, geometry.obstacle_params(o), p)
+    ax.contourf(x, y, np.asarray(phi), levels=[-9, 0], colors=[_OBSTACLE],
+                zorder=1)
   for t, colour in _TYPE_COLOURS.items():
     pts = boundary_positions[boundary_types == t]
     ax.scatter(pts[:, 0], pts[:, 1], s=1.5, c=colour, zorder=2, linewidths=0)
   ax.set_xlim(0, w)
   ax.set_ylim(0, h)
   ax.set_aspect("equal")
-  ax.set_xticks([])
-  ax.set_yticks([])
+  ax.set_xlabel("x (m)")
+  ax.set_ylabel("y (m)")
+
+
+def _legend(ax, scene: mpm.Scene):
+  handles = [patches.Patch(color=_SAND, label="sand"),
+             patches.Patch(color=_RAMP, label="ramp")]
+  if scene.obstacles:
+    handles.append(patches.Patch(color=_OBSTACLE, label="obstacle"))
+  ax.legend(handles=handles, loc="upper left", fontsize=8)
 
 
 def _panels(n: int, width: float = 5.0):
@@ -76,6 +97,7 @@ def animate(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
     ax.set_title(title)
     dots.append(ax.scatter(x[0, :, 0], x[0, :, 1], s=2, c=_SAND, zorder=3,
                            linewidths=0))
+  _legend(axes[0], scene)
   label = fig.suptitle("")
   frames = range(0, len(panels[0][1]), stride)
 
@@ -97,7 +119,7 @@ def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
                boundary_positions: np.ndarray, boundary_types: np.ndarray,
                frames: Sequence[int], out: str) -> str:
   """Writes a PNG grid: one row per chosen frame, one column per panel
-  (the layout of the paper's Figure 2)."""
+  (the layout of the paper's Figure 2), each titled with its time (s)."""
   fig, axes = plt.subplots(len(frames), len(panels),
                            figsize=(4.5 * len(panels), 3.4 * len(frames)),
                            squeeze=False)
@@ -106,7 +128,9 @@ def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
       ax = axes[row, col]
       _draw_scene(ax, scene, boundary_positions, boundary_types)
       ax.scatter(x[t, :, 0], x[t, :, 1], s=2, c=_SAND, zorder=3, linewidths=0)
-      ax.set_title(f"{title}, frame {t}")
+      ax.set_title(f"{title}, t = {t * scene.frame_dt:.2f} s (frame {t})",
+                   fontsize=9)
+  _legend(axes[0, 0], scene)
   fig.tight_layout()
   fig.savefig(out, dpi=80)
   plt.close(fig)

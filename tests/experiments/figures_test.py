@@ -36,6 +36,30 @@ class FiguresTest(absltest.TestCase):
     for path in (gif, png):
       self.assertGreater(os.path.getsize(path), 0, path)
 
+  def test_frame_grid_draws_solids_in_metres_with_a_legend(self):
+    scene = mpm.Scene.from_dict({**SCENE.to_dict(), "obstacles": [
+        {"shape": "rectangle", "x": 0.15, "width": 0.03, "height": 0.03}]})
+    captured = {}
+    savefig = figures.plt.Figure.savefig
+
+    def capture(fig, *args, **kwargs):
+      captured["axes"] = fig.axes
+      return savefig(fig, *args, **kwargs)
+
+    with absltest.mock.patch.object(figures.plt.Figure, "savefig", capture):
+      figures.frame_grid([("MPM", self.x)], scene, *mpm.boundary_particles(
+          scene), [0, 4], os.path.join(self.dir, "f.png"))
+    first = captured["axes"][0]
+    self.assertEqual(first.get_xlabel(), "x (m)")
+    self.assertIn("t = 0.00 s", first.get_title())
+    labels = [t.get_text() for t in first.get_legend().get_texts()]
+    self.assertEqual(labels, ["sand", "ramp", "obstacle"])
+    # Ramp and obstacle filled: one filled contour set each.
+    self.assertLen([c for c in first.collections
+                    if type(c).__name__ in ("QuadContourSet",
+                                            "PathCollection")
+                    and getattr(c, "filled", False)], 2)
+
   def test_objective_vs_x(self):
     sweep = {"mpm": [{"x": 0.5, "smooth": 0.2}, {"x": 1.3, "smooth": 0.4}]}
     history = [{"x": 1.0, "objective": 0.3}, {"x": 0.95, "objective": 0.28}]
