@@ -30,6 +30,7 @@ from typing import Any, Sequence
 
 import jax
 import numpy as np
+import tqdm
 
 import mpm
 from experiments import figures
@@ -105,8 +106,12 @@ def rollout_split(run: train.Run, path: str,
   """
   results = []
   problem = run.problem
+  total = data.num_trajectories(path)
+  if max_trajectories is not None:
+    total = min(total, max_trajectories)
+  bar = tqdm.tqdm(total=total, unit="traj", desc=f"rollouts (step {run.step})")
   for i, t in enumerate(data.trajectories(path)):
-    if max_trajectories is not None and i >= max_trajectories:
+    if i >= total:
       break
     frames = rollout_lib.predicted_frame_indices(
         len(t.positions), problem.input_frames, problem.frame_stride)
@@ -120,6 +125,8 @@ def rollout_split(run: train.Run, path: str,
       r["free_outside_domain"] = metrics.outside_domain(free, t.scene)
       r["free_mse"] = metrics.positional_mse(free, r["truth"])
     results.append(r)
+    bar.update(1)
+  bar.close()
   return results
 
 

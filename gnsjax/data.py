@@ -196,6 +196,12 @@ def trajectories(path: str) -> Iterator[mpm_io.Trajectory]:
   return mpm_io.read_trajectories(path)
 
 
+def num_trajectories(path: str) -> int:
+  """How many trajectories a split file holds."""
+  with mpm_io.open_file(path) as f:
+    return len(f.keys())
+
+
 def split_path(data_dir: str, split: str) -> str:
   """``<data_dir>/<split>.h5``, with a clear error when it is missing."""
   path = os.path.join(data_dir, f"{split}.h5")
