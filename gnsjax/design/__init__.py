@@ -10,6 +10,8 @@ Layered on the public APIs of ``gnsjax`` and ``mpm``:
   placement (``GNSRollout``, ``MPMRollout``: frozen pytrees whose settings
   are static), and their host drivers (``GNSDriver``, ``MPMDriver``).
 - ``optimize``: projected Adam, the brute-force sweep, central differences.
+- ``smoothing``: gradients of the objective smoothed in the parameters at a
+  user-set scale sigma (pathwise and score-function estimators, batched).
 - ``study``: a whole study (optimise, MPM verdict, sweep; csv, json and a
   report), imported on its own: it loads trained runs
   (``gnsjax.evaluate``).
@@ -24,6 +26,7 @@ The names most callers need are re-exported here::
 """
 
 from gnsjax.design import objectives
+from gnsjax.design import smoothing
 from gnsjax.design.optimize import central_difference
 from gnsjax.design.optimize import optimise
 from gnsjax.design.optimize import sweep
