@@ -4,7 +4,8 @@ A :class:`Scene` says everything one MPM run needs: the domain box, the ramp
 profile, the obstacles standing on it, where the sand starts, the material, the
 friction of the surfaces and the discretisation. Missing keys take the paper's
 defaults; invalid values raise ``InputError`` (a ``ValueError``) naming the
-key and the allowed range. Units are SI throughout (metres, seconds, kilograms, pascals).
+key and the allowed range. Units are SI throughout (metres, seconds,
+kilograms, pascals).
 """
 
 import dataclasses
