@@ -16,7 +16,6 @@ from absl import flags
 import mpm
 from experiments import runtime
 from experiments import tasks
-from gnsjax.design import placement
 from mpm import sampler
 from mpm import scene as scene_lib
 
@@ -40,8 +39,11 @@ _SHAPE = flags.DEFINE_enum("shape", "semicircle",
                            "Obstacle shape (without --scene).")
 _SIZE = flags.DEFINE_list("size", ["0.04"],
                           "Obstacle size (m): radius, or width/base,height.")
+# The design range of x (gnsjax.design.placement.X_RANGE, whose import
+# would cost seconds before the flags are even checked).
+_X_RANGE = sampler.OBSTACLE_X_RANGE
 _X0 = flags.DEFINE_float("x0", 1.0, "Starting obstacle x (m), in [%g, %g]."
-                         % placement.X_RANGE)
+                         % _X_RANGE)
 _FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per rollout.",
                                lower_bound=2)
 _WORKDIR = flags.DEFINE_string("workdir", tasks.PRETRAINED,
@@ -61,7 +63,7 @@ _OPTIMISE_SIZE = flags.DEFINE_bool(
 def _check_inputs() -> None:
   """Refuses bad flags before anything is created or compiled: the design
   range of x is one range, whether x comes from --x0 or --scene."""
-  lo, hi = placement.X_RANGE
+  lo, hi = _X_RANGE
   if _SCENE.value is not None:
     scene = mpm.Scene.load(runtime.existing_file("scene", _SCENE.value))
     if not scene.obstacles:
