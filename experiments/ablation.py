@@ -29,6 +29,15 @@ def main(argv):
   del argv
   if _MINUTES.value <= 0:
     raise app.UsageError(f"--minutes={_MINUTES.value}; allowed: > 0")
+  known = [name for name, _ in tasks.ABLATION]
+  unknown = sorted(set(_VARIANTS.value or ()) - set(known))
+  if unknown:
+    raise app.UsageError(f"--variants={','.join(_VARIANTS.value)}: unknown "
+                         f"{unknown}; allowed: a comma-separated subset of "
+                         f"{known}")
+  runtime.existing_dir("data", _DATA.value, holding="train.h5")
+  runtime.existing_dir("data", _DATA.value, holding="test.h5")
+  runtime.writable("out", _OUT.value)
   runtime.enable_compilation_cache()
   rows = tasks.ablation(_DATA.value, _OUT.value, minutes=_MINUTES.value,
                         variants=_VARIANTS.value,
@@ -39,4 +48,4 @@ def main(argv):
 
 if __name__ == "__main__":
   flags.mark_flags_as_required(["data", "out"])
-  app.run(main)
+  runtime.run(main)

@@ -6,23 +6,31 @@ scene (a triangle obstacle, never seen in training), writes the metrics and
 an MPM | GNS animation, and prints where everything is.
 """
 
-from absl import app
 from absl import flags
 from absl import logging
 
 from experiments import runtime
 from experiments import tasks
+from experiments.configs import small
+
+# The small model's first prediction needs its input frames at its stride.
+_MIN_FRAMES = (small.get_config().train.input_frames *
+               small.get_config().train.frame_stride + 1)
 
 _OUT = flags.DEFINE_string("out", "out/demo", "Output directory.")
-_STEPS = flags.DEFINE_integer("finetune_steps", 200, "Training steps.")
-_TRAIN = flags.DEFINE_integer("num_train", 4, "Training scenes to simulate.")
-_FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per scene.")
+_STEPS = flags.DEFINE_integer("finetune_steps", 200, "Training steps.",
+                              lower_bound=1)
+_TRAIN = flags.DEFINE_integer("num_train", 4, "Training scenes to simulate.",
+                              lower_bound=1)
+_FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per scene.",
+                               lower_bound=_MIN_FRAMES)
 _PRETRAINED = flags.DEFINE_bool("pretrained", True,
                                 "Start from the shipped small model.")
 
 
 def main(argv):
   del argv
+  runtime.writable("out", _OUT.value)
   # Orbax and XLA log every checkpoint and compilation at INFO: not for the
   # demo's reader (progress bars and the final figures are).
   logging.set_verbosity(logging.WARNING)
@@ -36,4 +44,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-  app.run(main)
+  runtime.run(main)

@@ -3,7 +3,6 @@
   python -m experiments.evaluate --workdir=RUN --data=DATA --out=DIR
 """
 
-from absl import app
 from absl import flags
 
 from experiments import runtime
@@ -13,9 +12,11 @@ _WORKDIR = flags.DEFINE_string("workdir", None, "Training run directory.")
 _DATA = flags.DEFINE_string("data", None, "Dataset directory.")
 _OUT = flags.DEFINE_string("out", None, "Output directory.")
 _MAX = flags.DEFINE_integer("max_trajectories", None,
-                            "Evaluate only the first test trajectories.")
+                            "Evaluate only the first test trajectories.",
+                            lower_bound=1)
 _REPEATS = flags.DEFINE_integer("timing_repeats", 3,
-                                "Repeats of each Table 2 timing (median).")
+                                "Repeats of each Table 2 timing (median).",
+                                lower_bound=1)
 _CHECKPOINTS = flags.DEFINE_bool(
     "checkpoint_errors", True, "Also evaluate the named checkpoints (Fig. 5).")
 _UNCONSTRAINED = flags.DEFINE_bool(
@@ -23,11 +24,15 @@ _UNCONSTRAINED = flags.DEFINE_bool(
     "report how much sand the model alone puts inside solids.")
 _CHECKPOINT_TRAJ = flags.DEFINE_integer(
     "checkpoint_trajectories", None,
-    "Test trajectories per checkpoint for Fig. 5 (default: all evaluated).")
+    "Test trajectories per checkpoint for Fig. 5 (default: all evaluated).",
+    lower_bound=1)
 
 
 def main(argv):
   del argv
+  runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
+  runtime.existing_dir("data", _DATA.value, holding="test.h5")
+  runtime.writable("out", _OUT.value)
   runtime.enable_compilation_cache()
   summary = evaluation.evaluate(
       _WORKDIR.value, _DATA.value, _OUT.value, max_trajectories=_MAX.value,
@@ -46,4 +51,4 @@ def main(argv):
 
 if __name__ == "__main__":
   flags.mark_flags_as_required(["workdir", "data", "out"])
-  app.run(main)
+  runtime.run(main)

@@ -13,8 +13,11 @@ x for GNS and MPM with the optimiser's path (see docs/inverse_design.md).
 from absl import app
 from absl import flags
 
+import mpm
 from experiments import runtime
 from experiments import tasks
+from mpm import sampler
+from mpm import scene as scene_lib
 
 _OUT = flags.DEFINE_string("out", "out/design", "Output directory.")
 _SIMULATOR = flags.DEFINE_enum("simulator", "gns", ["gns", "mpm"],
@@ -36,22 +39,77 @@ _SHAPE = flags.DEFINE_enum("shape", "semicircle",
                            "Obstacle shape (without --scene).")
 _SIZE = flags.DEFINE_list("size", ["0.04"],
                           "Obstacle size (m): radius, or width/base,height.")
-_X0 = flags.DEFINE_float("x0", 1.0, "Starting obstacle x (m).")
-_FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per rollout.")
+# The design range of x (gnsjax.design.placement.X_RANGE, whose import
+# would cost seconds before the flags are even checked).
+_X_RANGE = sampler.OBSTACLE_X_RANGE
+_X0 = flags.DEFINE_float("x0", 1.0, "Starting obstacle x (m), in [%g, %g]."
+                         % _X_RANGE)
+_FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per rollout.",
+                               lower_bound=2)
 _WORKDIR = flags.DEFINE_string("workdir", tasks.PRETRAINED,
                                "Trained GNS (default: the shipped model); "
                                "empty: MPM only.")
-_STEPS = flags.DEFINE_integer("steps", 8, "Gradient evaluations.")
-_LR = flags.DEFINE_float("learning_rate", 0.05, "Adam step size (m).")
-_SWEEP = flags.DEFINE_integer("sweep_points", 9, "MPM sweep placements.")
+_STEPS = flags.DEFINE_integer("steps", 8, "Gradient evaluations.",
+                              lower_bound=1)
+_LR = flags.DEFINE_float("learning_rate", 0.05, "Adam step size (m).",
+                         lower_bound=0)
+_SWEEP = flags.DEFINE_integer("sweep_points", 9, "MPM sweep placements.",
+                              lower_bound=2)
 _OPTIMISE_SIZE = flags.DEFINE_bool(
     "optimise_size", False, "Optimise the obstacle's size too (Table 1 "
     "ranges).")
 
 
+def _check_inputs() -> None:
+  """Refuses bad flags before anything is created or compiled: the design
+  range of x is one range, whether x comes from --x0 or --scene."""
+  lo, hi = _X_RANGE
+  if _SCENE.value is not None:
+    scene = mpm.Scene.load(runtime.existing_file("scene", _SCENE.value))
+    if not scene.obstacles:
+      raise runtime.InputError(f"--scene={_SCENE.value}: no obstacle to "
+                               "design; allowed: a scene with obstacles")
+    x = scene.obstacles[0].x
+    if not lo <= x <= hi:
+      raise runtime.InputError(f"--scene={_SCENE.value}: obstacles[0].x = "
+                               f"{x:g}; allowed: [{lo:g}, {hi:g}] m")
+  else:
+    if not lo <= _X0.value <= hi:
+      raise runtime.InputError(f"--x0={_X0.value:g}; allowed: [{lo:g}, "
+                               f"{hi:g}] m")
+    keys = scene_lib.OBSTACLE_SHAPES[_SHAPE.value]
+    ranges = sampler.SIZE_RANGES[_SHAPE.value]
+    try:
+      size = [float(s) for s in _SIZE.value]
+    except ValueError:
+      size = []
+    # Optimised sizes stay in Table 1's ranges; a fixed one need only fit.
+    if _OPTIMISE_SIZE.value:
+      ok = all(ranges[k][0] <= s <= ranges[k][1] for k, s in zip(keys, size))
+      allowed = ", ".join(f"{k} in [{ranges[k][0]:g}, {ranges[k][1]:g}]"
+                          for k in keys) + " m (--optimise_size)"
+    else:
+      ok = all(s > 0 for s in size)
+      allowed = "positive lengths in m"
+    if len(size) != len(keys) or not ok:
+      raise runtime.InputError(
+          f"--size={','.join(_SIZE.value)}: a {_SHAPE.value} needs "
+          f"{list(keys)}; allowed: {allowed}")
+  if _TEMPERATURE.value is not None and not _TEMPERATURE.value > 0:
+    raise runtime.InputError(f"--temperature={_TEMPERATURE.value:g}; "
+                             "allowed: > 0 (m)")
+  if _WORKDIR.value:
+    runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
+  elif _SIMULATOR.value == "gns":
+    raise app.UsageError("--simulator=gns needs --workdir (a trained "
+                         "model); or use --simulator=mpm")
+  runtime.writable("out", _OUT.value)
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f"unexpected arguments: {argv[1:]}")
+  _check_inputs()
   runtime.enable_compilation_cache()
   summary = tasks.inverse_design(
       _OUT.value, scene_path=_SCENE.value, shape=_SHAPE.value,
@@ -67,4 +125,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-  app.run(main)
+  runtime.run(main)

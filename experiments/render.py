@@ -1,19 +1,22 @@
 """Renders a trajectory file: an animation and a PNG grid of frames.
 
   python -m experiments.render --traj=traj.h5 --out=DIR [--index=0]
-  python -m experiments.render --traj=ROLL/truth.h5       --compare=ROLL/predicted.h5 --out=DIR      # MPM and GNS side by side
+  python -m experiments.render --traj=ROLL/truth.h5 \
+      --compare=ROLL/predicted.h5 --out=DIR    # MPM and GNS side by side
 """
 
-from absl import app
 from absl import flags
 
+from experiments import runtime
 from experiments import tasks
 
 _TRAJ = flags.DEFINE_string("traj", None, "Trajectory file (.h5).")
 _OUT = flags.DEFINE_string("out", None, "Output directory.")
-_INDEX = flags.DEFINE_integer("index", 0, "Which trajectory of the file.")
-_FRAMES = flags.DEFINE_list("frames", ["1", "80", "120", "180"],
-                            "Frames of the PNG grid (the paper's Figure 2).")
+_INDEX = flags.DEFINE_integer("index", 0, "Which trajectory of the file.",
+                              lower_bound=0)
+_FRAMES = flags.DEFINE_list(
+    "frames", None, "Frames of the PNG grid (default: those of the paper's "
+    "Figure 2, 1,80,120,180, that the trajectory has).")
 _FORMAT = flags.DEFINE_enum("format", "gif", ["gif", "mp4"],
                             "Animation format (mp4 needs ffmpeg).")
 _COMPARE = flags.DEFINE_string(
@@ -21,14 +24,30 @@ _COMPARE = flags.DEFINE_string(
     "beside --traj.")
 
 
+
+
+def _check_frames(value: list[str] | None) -> bool:
+  if value is not None and not (value and all(f.isdigit() for f in value)):
+    raise flags.ValidationError("expected comma-separated frame indices "
+                                "(integers >= 0)")
+  return True
+
+
+flags.register_validator("frames", _check_frames)
+
+
 def main(argv):
   del argv
+  runtime.existing_file("traj", _TRAJ.value)
+  runtime.existing_file("compare", _COMPARE.value)
+  runtime.writable("out", _OUT.value)
+  frames = None if _FRAMES.value is None else [int(f) for f in _FRAMES.value]
   for path in tasks.render_file(_TRAJ.value, _OUT.value, _INDEX.value,
-                                [int(f) for f in _FRAMES.value],
-                                _FORMAT.value, compare_path=_COMPARE.value):
+                                frames, _FORMAT.value,
+                                compare_path=_COMPARE.value):
     print(path)
 
 
 if __name__ == "__main__":
   flags.mark_flags_as_required(["traj", "out"])
-  app.run(main)
+  runtime.run(main)

@@ -10,8 +10,6 @@ their scenes' ``frame_dt`` set to match. ``--noproject`` switches the solid
 constraint off (to see what the model alone does).
 """
 
-
-from absl import app
 from absl import flags
 
 from experiments import runtime
@@ -29,6 +27,9 @@ _PROJECT = flags.DEFINE_bool("project", True, "Keep sand out of solids after "
 
 def main(argv):
   del argv
+  runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
+  runtime.existing_dir("data", _DATA.value, holding=f"{_SPLIT.value}.h5")
+  runtime.writable("out", _OUT.value)
   runtime.enable_compilation_cache()
   paths = tasks.rollout_to_files(_WORKDIR.value, _DATA.value, _OUT.value,
                                  _SPLIT.value, _MAX.value,
@@ -39,4 +40,4 @@ def main(argv):
 
 if __name__ == "__main__":
   flags.mark_flags_as_required(["workdir", "data", "out"])
-  app.run(main)
+  runtime.run(main)

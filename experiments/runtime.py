@@ -1,8 +1,98 @@
-"""Process-wide settings shared by the entry points."""
+"""Process-wide settings shared by the entry points, and how they refuse
+bad input: one line on stderr, exit code 2, nothing written.
+
+Every entry point ends in ``runtime.run(main)`` (instead of
+``app.run(main)``) and checks its flags before it creates anything; what
+it refuses it raises as ``InputError`` (or ``app.UsageError``).
+"""
 
 import os
+import sys
+from typing import Callable
 
+from absl import app
+from absl import flags
 import jax
+
+import mpm
+from mpm import io as mpm_io
+
+# A value given by the user is malformed or out of range (a flag, a scene
+# key, a config entry); the message names it and what is allowed.
+InputError = mpm.InputError
+
+# What is reported in one line: bad input, and files that are missing or not
+# in the format. Anything else is a bug and keeps its traceback.
+BAD_INPUT = (InputError, mpm_io.FormatError, app.UsageError)
+EXIT_BAD_INPUT = 2
+
+_VERBOSE = flags.DEFINE_bool(
+    "verbose", False, "On bad input, show the traceback, not only the "
+    "one-line error.")
+
+
+def _refuse(error: Exception) -> None:
+  print(f"error: {error}", file=sys.stderr)
+  sys.exit(EXIT_BAD_INPUT)
+
+
+def _parse_flags(argv: list[str]) -> list[str]:
+  try:
+    return flags.FLAGS(argv)
+  except flags.Error as e:  # unknown flag, bad value, failed validator
+    _refuse(e)
+
+
+def run(main: Callable[[list[str]], None]) -> None:
+  """``app.run(main)``, bad input reported as ``error: <message>`` with exit
+  code 2 (with its traceback under ``--verbose``)."""
+  def checked(argv):
+    try:
+      return main(argv)
+    except BAD_INPUT as e:
+      if _VERBOSE.value:
+        raise
+      _refuse(e)
+  app.run(checked, flags_parser=_parse_flags)
+
+
+def existing_file(flag: str, path: str | None) -> str | None:
+  """``path`` (None passes); InputError naming ``--flag`` if no such file."""
+  if path is not None and not os.path.isfile(path):
+    raise InputError(f"--{flag}={path}: no such file")
+  return path
+
+
+def existing_dir(flag: str, path: str, holding: str = "") -> str:
+  """``path``; InputError naming ``--flag`` unless it is a directory (that
+  holds the file ``holding``, if given)."""
+  if not os.path.isdir(path):
+    raise InputError(f"--{flag}={path}: no such directory")
+  if holding and not os.path.exists(os.path.join(path, holding)):
+    present = sorted(os.listdir(path))[:8]
+    raise InputError(f"--{flag}={path}: no {holding} in it (it holds "
+                     f"{present})")
+  return path
+
+
+def writable(flag: str, path: str, *, directory: bool = True) -> str:
+  """Checks that ``path`` can be created or written (a directory, or a file
+  if not ``directory``) without creating anything.
+
+  Raises:
+    InputError: naming ``--flag`` and why not.
+  """
+  if os.path.exists(path) and os.path.isdir(path) != directory:
+    raise InputError(f"--{flag}={path}: exists and is not a "
+                     f"{'directory' if directory else 'file'}")
+  parent = os.path.dirname(os.path.abspath(path))
+  while not os.path.exists(parent):
+    parent = os.path.dirname(parent)
+  if not os.path.isdir(parent):
+    raise InputError(f"--{flag}={path}: {parent} is a file, not a directory")
+  if not os.access(parent, os.W_OK | os.X_OK):
+    raise InputError(f"--{flag}={path}: {parent} is not writable")
+  return path
 
 
 def enable_compilation_cache(path: str | None = None) -> str:

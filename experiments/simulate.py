@@ -16,21 +16,25 @@ from experiments import tasks
 _SCENE = flags.DEFINE_string("scene", None, "Scene JSON file.")
 _SEED = flags.DEFINE_integer(
     "seed", None, "Sample a scene from the paper's Table 1 with this seed "
-    "instead of reading --scene.")
+    "instead of reading --scene.", lower_bound=0)
 _OUT = flags.DEFINE_string("out", None, "Output trajectory file (.h5).")
 _CHUNK = flags.DEFINE_integer("chunk_frames", 50,
-                              "Frames per compiled call (checking interval).")
+                              "Frames per compiled call (checking interval).",
+                              lower_bound=1)
 
 
 def main(argv):
   del argv
-  runtime.enable_compilation_cache()
   if (_SCENE.value is None) == (_SEED.value is None):
     raise app.UsageError("give exactly one of --scene and --seed")
   if _SEED.value is not None:
     scene, seed = mpm.sample_scene(_SEED.value), _SEED.value
   else:
-    scene, seed = mpm.Scene.load(_SCENE.value), -1
+    scene = mpm.Scene.load(runtime.existing_file("scene", _SCENE.value))
+    seed = -1
+  # Before minutes of simulating: the file must be writable at the end.
+  runtime.writable("out", _OUT.value, directory=False)
+  runtime.enable_compilation_cache()
   logging.info("devices: %s", jax.devices())
   result = tasks.simulate_to_file(scene, _OUT.value, seed, _CHUNK.value)
   print(f"{_OUT.value}: {result.positions.shape[0]} frames, "
@@ -41,4 +45,4 @@ def main(argv):
 
 if __name__ == "__main__":
   flags.mark_flag_as_required("out")
-  app.run(main)
+  runtime.run(main)

@@ -20,11 +20,13 @@ from mpm import io as mpm_io
 
 def simulate_to_file(scene: mpm.Scene, out: str, seed: int = -1,
                      chunk_frames: int = 50) -> mpm.SimulationResult:
-  """Simulates ``scene`` with a progress bar and writes the file ``out``."""
+  """Simulates ``scene`` with a progress bar and writes the file ``out``
+  (creating its directory)."""
   with tqdm.tqdm(total=scene.num_frames - 1, unit="frame",
                  desc=scene.name) as bar:
     result = mpm.simulate(scene, chunk_frames=chunk_frames,
                           progress=lambda done: bar.update(done - bar.n))
+  os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
   mpm_io.write_trajectories(out, [mpm_io.Trajectory.from_result(result, seed)])
   return result
 
@@ -32,29 +34,36 @@ def simulate_to_file(scene: mpm.Scene, out: str, seed: int = -1,
 def _nth(path: str, index: int) -> mpm_io.Trajectory:
   trajectories = list(mpm_io.read_trajectories(path))
   if not 0 <= index < len(trajectories):
-    raise ValueError(f"index={index}: {path} holds {len(trajectories)} "
+    raise mpm.InputError(f"index={index}: {path} holds {len(trajectories)} "
                      f"trajectories; allowed: 0..{len(trajectories) - 1}")
   return trajectories[index]
 
 
 def render_file(traj_path: str, out_dir: str, index: int = 0,
-                frames: Sequence[int] = (1, 80, 120, 180),
+                frames: Sequence[int] | None = None,
                 fmt: str = "gif",
                 compare_path: str | None = None) -> tuple[str, str]:
   """Writes ``animation.<fmt>`` and ``frames.png`` for one trajectory, beside
   the same trajectory of ``compare_path`` if given (the paper's Fig. 2: MPM
-  left, GNS right)."""
+  left, GNS right). ``frames`` of the grid default to the paper's (1, 80,
+  120, 180) that the trajectory has."""
   t = _nth(traj_path, index)
-  os.makedirs(out_dir, exist_ok=True)
+  n = len(t.positions)
   panels = [(f"MPM: {t.scene.name}", t.positions)]
   if compare_path is not None:
     other = _nth(compare_path, index)
     if other.positions.shape != t.positions.shape:
-      raise ValueError(f"{compare_path}: trajectory {index} has shape "
-                       f"{other.positions.shape}, {traj_path} has "
-                       f"{t.positions.shape}")
+      raise mpm.InputError(f"{compare_path}: trajectory {index} has shape "
+                           f"{other.positions.shape}, {traj_path} has "
+                           f"{t.positions.shape}")
     panels.append(("GNS", other.positions))
-  frames = [f for f in frames if f < len(t.positions)]
+  if frames is None:
+    frames = [f for f in (1, 80, 120, 180) if f < n]
+  elif not all(0 <= f < n for f in frames):
+    raise mpm.InputError(f"frames {list(frames)}: {traj_path} trajectory "
+                         f"{index} has {n} frames; allowed: comma-separated "
+                         f"frame indices in [0, {n - 1}]")
+  os.makedirs(out_dir, exist_ok=True)
   anim = figures.animate(panels, t.scene, t.boundary_positions,
                          t.boundary_type,
                          os.path.join(out_dir, f"animation.{fmt}"))

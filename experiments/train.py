@@ -4,7 +4,6 @@
       --data=DATA_DIR --workdir=WORKDIR [--config.train.num_steps=...]
 """
 
-from absl import app
 from absl import flags
 from absl import logging
 import jax
@@ -21,6 +20,12 @@ _WORKDIR = flags.DEFINE_string("workdir", None, "Run directory.")
 
 def main(argv):
   del argv
+  try:
+    train.check_config(_CONFIG.value)
+  except ValueError as e:
+    raise runtime.InputError(f"--config: {e}") from e
+  runtime.existing_dir("data", _DATA.value, holding="train.h5")
+  runtime.writable("workdir", _WORKDIR.value)
   runtime.enable_compilation_cache()
   logging.info("devices: %s", jax.devices())
   metrics = train.train_and_evaluate(_CONFIG.value, _DATA.value,
@@ -31,4 +36,4 @@ def main(argv):
 
 if __name__ == "__main__":
   flags.mark_flags_as_required(["config", "data", "workdir"])
-  app.run(main)
+  runtime.run(main)

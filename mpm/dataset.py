@@ -68,6 +68,18 @@ class DatasetSpec:
   spacing: float = PAPER_SPACING
   connectivity_radius: float = 0.015
 
+  def __post_init__(self):
+    # Both splits are written, and the statistics need 3 frames.
+    for key, lo in (("num_train", 1), ("num_test", 1), ("num_frames", 3)):
+      value = getattr(self, key)
+      if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise scene_lib.InputError(f"dataset.{key} = {value!r}; allowed: an "
+                                   f"integer >= {lo}")
+    for key in ("spacing", "connectivity_radius"):
+      if not getattr(self, key) > 0:
+        raise scene_lib.InputError(f"dataset.{key} = {getattr(self, key)!r};"
+                                   " allowed: > 0")
+
   def particles(self, n: int) -> int:
     """A paper particle count at this spacing."""
     return max(1, int(round(n * (PAPER_SPACING / self.spacing)**2)))
@@ -136,6 +148,39 @@ def _part_ok(path: str) -> bool:
     return False
 
 
+_SPEC_FILE = "spec.json"
+
+
+def _differences(stored: dict, spec: DatasetSpec) -> list[str]:
+  current = dataclasses.asdict(spec)
+  return [f"{k} {stored.get(k)!r} (this config: {current[k]!r})"
+          for k in current if stored.get(k) != current[k]]
+
+
+def check_target(spec: DatasetSpec, out_dir: str) -> None:
+  """Refuses ``out_dir`` if it holds a dataset, or the parts of one, made
+  with another spec (resuming or reusing it would mix or misreport them).
+
+  Raises:
+    InputError: naming the directory and the differing values.
+  """
+  for name, what in (("metadata.json", "a dataset"),
+                     (os.path.join("parts", _SPEC_FILE),
+                      "an unfinished dataset")):
+    path = os.path.join(out_dir, name)
+    if not os.path.exists(path):
+      continue
+    with open(path) as f:
+      stored = json.load(f)
+    stored = stored.get("spec", {}) if name == "metadata.json" else stored
+    differences = _differences(stored, spec)
+    if differences:
+      raise scene_lib.InputError(
+          f"{out_dir} holds {what} of another config: its "
+          f"{', '.join(differences)}; use another directory or the same "
+          "config")
+
+
 def _init_worker(cache_dir: str | None) -> None:
   if cache_dir:
     jax.config.update("jax_compilation_cache_dir", cache_dir)
@@ -153,14 +198,21 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
       trajectory (also for parts found finished from an earlier run).
 
   Returns:
-    The metadata written.
+    The metadata written (or found, if the dataset is complete).
+
+  Raises:
+    InputError: ``out_dir`` holds a dataset or parts of another spec.
   """
+  check_target(spec, out_dir)
   meta_path = os.path.join(out_dir, "metadata.json")
   if os.path.exists(meta_path):
     with open(meta_path) as f:
       return json.load(f)
   parts_dir = os.path.join(out_dir, "parts")
   os.makedirs(parts_dir, exist_ok=True)
+  spec_path = os.path.join(parts_dir, _SPEC_FILE)
+  if not os.path.exists(spec_path):
+    mpm_io.write_json(spec_path, dataclasses.asdict(spec))
   for stale in glob.glob(os.path.join(parts_dir, "*.tmp-*")):
     os.remove(stale)  # half-written by a killed run
   items = plan(spec)

@@ -3,8 +3,9 @@
 A :class:`Scene` says everything one MPM run needs: the domain box, the ramp
 profile, the obstacles standing on it, where the sand starts, the material, the
 friction of the surfaces and the discretisation. Missing keys take the paper's
-defaults; invalid values raise ``ValueError`` naming the key and the allowed
-range. Units are SI throughout (metres, seconds, kilograms, pascals).
+defaults; invalid values raise ``InputError`` (a ``ValueError``) naming the
+key and the allowed range. Units are SI throughout (metres, seconds,
+kilograms, pascals).
 """
 
 import dataclasses
@@ -14,8 +15,20 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+
+class InputError(ValueError):
+  """A value given by the user (a scene key, a flag) is malformed or out of
+  range; the message names it, the value and the allowed values."""
+
 # The paper's ramp, eq. (5): y(x) = sum_k c_k x^k in metres.
 PAPER_RAMP_COEFFICIENTS = (0.1086, -0.5179, 1.3434, -1.6513, 0.8923)
+
+# Stiffer sand needs more substeps (c_p grows like sqrt(E)); above this the
+# cost runs to hours per trajectory (docs/physics.md, section 6).
+MAX_YOUNGS_MODULUS = 1e9  # Pa
+# The MPM's time per substep on a CPU (docs/performance.md), for the
+# estimate in the error above the bound.
+_SECONDS_PER_SUBSTEP = 447e-6
 
 # Size keys of each obstacle shape (metres).
 OBSTACLE_SHAPES = {
@@ -177,7 +190,7 @@ class Scene:
     try:
       d = json.loads(text)
     except json.JSONDecodeError as e:
-      raise ValueError(f"scene is not valid JSON: {e}") from e
+      raise InputError(f"scene is not valid JSON: {e}") from e
     return _parse_scene(d)
 
   @classmethod
@@ -191,11 +204,11 @@ class Scene:
 
 def _check_keys(d: Any, allowed: Sequence[str], where: str) -> None:
   if not isinstance(d, Mapping):
-    raise ValueError(f"{where}: expected an object with keys {list(allowed)}, "
+    raise InputError(f"{where}: expected an object with keys {list(allowed)}, "
                      f"got {type(d).__name__}")
   unknown = sorted(set(d) - set(allowed))
   if unknown:
-    raise ValueError(f"{where}: unknown key(s) {unknown}; allowed keys are "
+    raise InputError(f"{where}: unknown key(s) {unknown}; allowed keys are "
                      f"{list(allowed)}")
 
 
@@ -206,14 +219,14 @@ def _number(d: Mapping[str, Any], key: str, default: Any, where: str,
   value = d.get(key, default)
   name = f"{where}.{key}" if where else key
   if isinstance(value, bool) or not isinstance(value, (int, float)):
-    raise ValueError(f"{name}: expected a number, got {value!r}")
+    raise InputError(f"{name}: expected a number, got {value!r}")
   value = float(value)
   too_low = value <= lo if lo_open else value < lo
   too_high = value >= hi if hi_open else value > hi
   if not math.isfinite(value) or too_low or too_high:
     interval = (("(" if lo_open else "[") + f"{lo:g}, {hi:g}" +
                 (")" if hi_open else "]"))
-    raise ValueError(f"{name} = {value:g} is out of range; allowed: {interval}")
+    raise InputError(f"{name} = {value:g} is out of range; allowed: {interval}")
   return value
 
 
@@ -222,9 +235,9 @@ def _integer(d: Mapping[str, Any], key: str, default: Any, where: str,
   value = d.get(key, default)
   name = f"{where}.{key}" if where else key
   if isinstance(value, bool) or not isinstance(value, int):
-    raise ValueError(f"{name}: expected an integer >= {lo}, got {value!r}")
+    raise InputError(f"{name}: expected an integer >= {lo}, got {value!r}")
   if value < lo:
-    raise ValueError(f"{name} = {value} is out of range; allowed: >= {lo}")
+    raise InputError(f"{name} = {value} is out of range; allowed: >= {lo}")
   return value
 
 
@@ -236,7 +249,7 @@ def _parse_ramp(d: Mapping[str, Any], domain: Domain) -> Ramp:
     if (not isinstance(coefficients, (list, tuple)) or not coefficients or
         not all(isinstance(c, (int, float)) and math.isfinite(c)
                 for c in coefficients)):
-      raise ValueError("ramp.coefficients: expected a non-empty list of finite "
+      raise InputError("ramp.coefficients: expected a non-empty list of finite "
                        f"numbers c_k with y(x) = sum c_k x^k, got {coefficients!r}")
     return Ramp("polynomial", tuple(float(c) for c in coefficients))
   if kind == "polyline":
@@ -245,17 +258,17 @@ def _parse_ramp(d: Mapping[str, Any], domain: Domain) -> Ramp:
     ok = (isinstance(points, (list, tuple)) and len(points) >= 2 and
           all(isinstance(p, (list, tuple)) and len(p) == 2 for p in points))
     if not ok:
-      raise ValueError("ramp.points: expected a list of at least two [x, y] "
+      raise InputError("ramp.points: expected a list of at least two [x, y] "
                        f"pairs, got {points!r}")
     pts = np.asarray(points, dtype=np.float64)
     if not np.all(np.isfinite(pts)) or np.any(np.diff(pts[:, 0]) <= 0):
-      raise ValueError("ramp.points: x must be finite and strictly increasing")
+      raise InputError("ramp.points: x must be finite and strictly increasing")
     if pts[0, 0] > 0 or pts[-1, 0] < domain.width:
-      raise ValueError(f"ramp.points: must span the domain; x range "
+      raise InputError(f"ramp.points: must span the domain; x range "
                        f"[{pts[0, 0]:g}, {pts[-1, 0]:g}] must cover "
                        f"[0, {domain.width:g}]")
     return Ramp("polyline", points=tuple((float(x), float(y)) for x, y in pts))
-  raise ValueError(f"ramp.kind: unknown kind {kind!r}; allowed: "
+  raise InputError(f"ramp.kind: unknown kind {kind!r}; allowed: "
                    "'polynomial', 'polyline'")
 
 
@@ -264,18 +277,18 @@ def _parse_obstacle(d: Mapping[str, Any], i: int, domain: Domain,
   where = f"obstacles[{i}]"
   if not isinstance(d, Mapping) or d.get("shape") not in OBSTACLE_SHAPES:
     shape = d.get("shape") if isinstance(d, Mapping) else d
-    raise ValueError(f"{where}.shape: unknown shape {shape!r}; allowed: "
+    raise InputError(f"{where}.shape: unknown shape {shape!r}; allowed: "
                      f"{list(OBSTACLE_SHAPES)}")
   shape = d["shape"]
   sizes = OBSTACLE_SHAPES[shape]
   _check_keys(d, ("shape", "x") + sizes, where)
   if "x" not in d:
-    raise ValueError(f"{where}.x: missing; the base centre's horizontal "
+    raise InputError(f"{where}.x: missing; the base centre's horizontal "
                      f"position, allowed: (0, {domain.width:g})")
   values = {}
   for key in sizes:
     if key not in d:
-      raise ValueError(f"{where}.{key}: missing; a {shape} needs {list(sizes)}")
+      raise InputError(f"{where}.{key}: missing; a {shape} needs {list(sizes)}")
     values[key] = _number(d, key, None, where, lo=0.0, hi=min(
         domain.width, domain.height) / 2, lo_open=True)
   x = _number(d, "x", None, where, lo=0.0, hi=domain.width, lo_open=True,
@@ -283,12 +296,12 @@ def _parse_obstacle(d: Mapping[str, Any], i: int, domain: Domain,
   obstacle = Obstacle(shape, x, **values)
   reach = obstacle.reach
   if x - reach < 0 or x + reach > domain.width:
-    raise ValueError(f"{where}.x = {x:g}: the obstacle (reach {reach:g} m) "
+    raise InputError(f"{where}.x = {x:g}: the obstacle (reach {reach:g} m) "
                      f"leaves the domain; allowed: [{reach:g}, "
                      f"{domain.width - reach:g}]")
   base_y = float(ramp.height(x))
   if not 0.0 <= base_y <= domain.height - reach:
-    raise ValueError(f"{where}.x = {x:g}: off the ramp; the ramp there is at "
+    raise InputError(f"{where}.x = {x:g}: off the ramp; the ramp there is at "
                      f"y = {base_y:.3f} m, and the obstacle needs the ramp "
                      f"within [0, {domain.height - reach:.3f}] m")
   return obstacle
@@ -299,7 +312,7 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
   _check_keys(d, allowed, "scene")
   name = d.get("name", "scene")
   if not isinstance(name, str) or not name:
-    raise ValueError(f"name: expected a non-empty string, got {name!r}")
+    raise InputError(f"name: expected a non-empty string, got {name!r}")
 
   dd = d.get("domain", {})
   _check_keys(dd, ("width", "height"), "domain")
@@ -310,7 +323,7 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
 
   raw_obstacles = d.get("obstacles", [])
   if not isinstance(raw_obstacles, (list, tuple)):
-    raise ValueError(f"obstacles: expected a list, got {raw_obstacles!r}")
+    raise InputError(f"obstacles: expected a list, got {raw_obstacles!r}")
   obstacles = tuple(_parse_obstacle(o, i, domain, ramp)
                     for i, o in enumerate(raw_obstacles))
   for i, a in enumerate(obstacles):
@@ -319,7 +332,7 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
       gap = abs(a.x - b.x)
       need = a.reach + b.reach
       if gap < need:
-        raise ValueError(
+        raise InputError(
             f"obstacles[{i}].x = {a.x:g}: overlaps obstacles[{j}] at x = "
             f"{b.x:g}; base centres must be at least {need:.3f} m apart")
 
@@ -330,17 +343,17 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
   box = gd.get("box", Granular.box)
   if (not isinstance(box, (list, tuple)) or len(box) != 4 or
       not all(isinstance(v, (int, float)) for v in box)):
-    raise ValueError(f"granular.box: expected [x_min, y_min, x_max, y_max], "
+    raise InputError(f"granular.box: expected [x_min, y_min, x_max, y_max], "
                      f"got {box!r}")
   x0, y0, x1, y1 = (float(v) for v in box)
   if not (0 <= x0 < x1 <= domain.width and 0 <= y0 < y1 <= domain.height):
-    raise ValueError(f"granular.box = {list(box)}: must satisfy 0 <= x_min < "
+    raise InputError(f"granular.box = {list(box)}: must satisfy 0 <= x_min < "
                      f"x_max <= {domain.width:g} and 0 <= y_min < y_max <= "
                      f"{domain.height:g}")
   spacing = _number(gd, "spacing", Granular.spacing, "granular", 0,
                     min(x1 - x0, y1 - y0), lo_open=True)
   if np.all(ramp.height(np.linspace(x0, x1, 101)) >= y1):
-    raise ValueError(f"granular.box = {list(box)}: lies inside the ramp "
+    raise InputError(f"granular.box = {list(box)}: lies inside the ramp "
                      "(the ramp is above y_max everywhere in [x_min, x_max]); "
                      "allowed: a box reaching above the ramp surface")
   num_particles = gd.get("num_particles", None)
@@ -348,28 +361,34 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
     num_particles = _integer(gd, "num_particles", None, "granular", 1)
   granular = Granular((x0, y0, x1, y1), spacing, num_particles)
 
-  md = d.get("material", {})
-  _check_keys(md, [f.name for f in dataclasses.fields(Material)], "material")
-  material = Material(
-      density=_number(md, "density", Material.density, "material", 0,
-                      lo_open=True),
-      youngs_modulus=_number(md, "youngs_modulus", Material.youngs_modulus,
-                             "material", 0, lo_open=True),
-      poisson_ratio=_number(md, "poisson_ratio", Material.poisson_ratio,
-                            "material", 0.0, 0.5, hi_open=True),
-      friction_angle_deg=_number(md, "friction_angle_deg",
-                                 Material.friction_angle_deg, "material",
-                                 0.0, 80.0))
-
   sd = d.get("solver", {})
   _check_keys(sd, ("dx", "cfl"), "solver")
   dx = _number(sd, "dx", 2.0 * spacing, "solver", 0,
                min(domain.width, domain.height) / 4, lo_open=True)
   if spacing > dx:
-    raise ValueError(f"granular.spacing = {spacing:g} is larger than "
+    raise InputError(f"granular.spacing = {spacing:g} is larger than "
                      f"solver.dx = {dx:g}; allowed: spacing <= dx")
   solver = Solver(dx, _number(sd, "cfl", Solver.cfl, "solver", 0, 1,
                               lo_open=True))
+  frame_dt = _number(d, "frame_dt", 0.0025, "", 0, 1, lo_open=True)
+  num_frames = _integer(d, "num_frames", 600, "", 1)
+
+  md = d.get("material", {})
+  _check_keys(md, [f.name for f in dataclasses.fields(Material)], "material")
+  density = _number(md, "density", Material.density, "material", 0,
+                    lo_open=True)
+  poisson_ratio = _number(md, "poisson_ratio", Material.poisson_ratio,
+                          "material", 0.0, 0.5, hi_open=True)
+  _check_stiffness(md.get("youngs_modulus"), density, poisson_ratio, solver,
+                   frame_dt, num_frames)
+  material = Material(
+      density=density,
+      youngs_modulus=_number(md, "youngs_modulus", Material.youngs_modulus,
+                             "material", 0, MAX_YOUNGS_MODULUS, lo_open=True),
+      poisson_ratio=poisson_ratio,
+      friction_angle_deg=_number(md, "friction_angle_deg",
+                                 Material.friction_angle_deg, "material",
+                                 0.0, 80.0))
 
   return Scene(
       domain=domain, ramp=ramp, obstacles=obstacles, granular=granular,
@@ -377,6 +396,23 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
       boundary_friction=_number(d, "boundary_friction", 0.5, "", 0.0, 10.0),
       wall_friction=_number(d, "wall_friction", 0.0, "", 0.0, 10.0),
       solver=solver,
-      num_frames=_integer(d, "num_frames", 600, "", 1),
-      frame_dt=_number(d, "frame_dt", 0.0025, "", 0, 1, lo_open=True),
-      name=name)
+      num_frames=num_frames, frame_dt=frame_dt, name=name)
+
+
+def _check_stiffness(e: Any, density: float, nu: float, solver: Solver,
+                     frame_dt: float, num_frames: int) -> None:
+  """Refuses a Young's modulus ``e`` above ``MAX_YOUNGS_MODULUS`` with the
+  substeps it would cost (the CFL condition of ``simulation``, from the
+  wave speed alone: a lower bound)."""
+  if (isinstance(e, bool) or not isinstance(e, (int, float)) or
+      not MAX_YOUNGS_MODULUS < e < math.inf):
+    return  # in range, or not a number: _number says what is allowed
+  c_p = math.sqrt(e * (1 - nu) / ((1 + nu) * (1 - 2 * nu)) / density)
+  per_frame = math.ceil(frame_dt * c_p / (solver.cfl * solver.dx))
+  total = per_frame * max(num_frames - 1, 1)
+  hours = total * _SECONDS_PER_SUBSTEP / 3600
+  raise InputError(
+      f"material.youngs_modulus = {e:g} is out of range; allowed: (0, "
+      f"{MAX_YOUNGS_MODULUS:g}] Pa: it would need at least {per_frame:,} "
+      f"substeps per frame, {total:,} in all (about {hours:.3g} h at "
+      f"{_SECONDS_PER_SUBSTEP * 1e6:.0f} us per substep)")

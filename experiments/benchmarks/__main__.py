@@ -104,6 +104,7 @@ def main(argv):
     raise app.UsageError(f"unexpected arguments: {argv[1:]}")
   what = _WHAT.value
   check_inputs(what)
+  runtime.writable("out", _OUT.value)
   out, quick = _OUT.value, _QUICK.value
   runs = {
       "mpm": lambda: mpm_benchmark.run_benchmark(
@@ -129,4 +130,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-  app.run(main)
+  runtime.run(main)

@@ -72,7 +72,6 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
   if simulator not in SIMULATORS:
     raise ValueError(f"simulator: unknown {simulator!r}; allowed: "
                      f"{list(SIMULATORS)}")
-  os.makedirs(out_dir, exist_ok=True)
   placement = placement_lib.Placement(
       scene, free=("x", "size") if optimise_size else ("x",))
   sims = {"mpm": rollouts.MPMDriver(rollouts.MPMRollout.create(placement))}
@@ -91,6 +90,7 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
         f"{objective.name} = {r['objective']:.5g}, d/dx = {r['grad_x']:.4g}, "
         f"{r['seconds']:.1f} s")
 
+  os.makedirs(out_dir, exist_ok=True)  # once the inputs are known good
   start = placement.initial()
   history = optimize.optimise(sims[simulator], objective.smooth, start,
                               steps=steps, learning_rate=learning_rate,

@@ -46,7 +46,9 @@ class EntryPointsTest(absltest.TestCase):
     scene = os.path.join(self.dir, "scene.json")
     with open(scene, "w") as f:
       json.dump(TINY_SCENE, f)
-    traj = os.path.join(self.dir, "traj.h5")
+    # The output's directory is created (after the simulation, which a
+    # missing directory used to lose).
+    traj = os.path.join(self.dir, "new", "traj.h5")
     out = run("experiments.simulate", f"--scene={scene}", f"--out={traj}")
     self.assertIn("12 frames", out)
     (t,) = mpm_io.read_trajectories(traj)

@@ -158,6 +158,40 @@ class DatasetTest(absltest.TestCase):
                           for p in problems), problems)
 
 
+class OtherSpecTest(absltest.TestCase):
+  """A directory of another spec's dataset or parts is refused, not resumed
+  (no simulation: the refusal comes first)."""
+
+  def setUp(self):
+    super().setUp()
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    self.dir = tmp.name
+
+  def test_other_parts_are_refused(self):
+    os.makedirs(os.path.join(self.dir, "parts"))
+    other = dataclasses.replace(SPEC, num_frames=20)
+    mpm_io.write_json(os.path.join(self.dir, "parts", "spec.json"),
+                      dataclasses.asdict(other))
+    with self.assertRaisesRegex(
+        dataset.scene_lib.InputError, "holds an unfinished dataset of another "
+        "config: its num_frames 20 \\(this config: 12\\)"):
+      dataset.generate(SPEC, self.dir, workers=1)
+    dataset.check_target(other, self.dir)  # the same spec resumes
+
+  def test_other_dataset_is_refused(self):
+    mpm_io.write_json(os.path.join(self.dir, "metadata.json"),
+                      {"spec": dataclasses.asdict(SPEC), "num_train": 3})
+    with self.assertRaisesRegex(dataset.scene_lib.InputError,
+                                "its num_train 3 \\(this config: 4\\)"):
+      dataset.generate(dataclasses.replace(SPEC, num_train=4), self.dir)
+    self.assertEqual(dataset.generate(SPEC, self.dir)["num_train"], 3)
+
+  def test_spec_values_are_checked(self):
+    with self.assertRaisesRegex(ValueError, "dataset.num_test = 0; allowed"):
+      dataclasses.replace(SPEC, num_test=0)
+
+
 class FileErrorTest(absltest.TestCase):
 
   def setUp(self):

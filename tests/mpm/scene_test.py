@@ -153,7 +153,7 @@ def _invalid_cases():
            key="material.density", allowed="allowed: (0, inf]"),
       dict(testcase_name="zero_youngs_modulus",
            d=_with(material__youngs_modulus=0),
-           key="material.youngs_modulus", allowed="allowed: (0, inf]"),
+           key="material.youngs_modulus", allowed="allowed: (0, 1e+09]"),
       dict(testcase_name="poisson_ratio_half",
            d=_with(material__poisson_ratio=0.5),
            key="material.poisson_ratio", allowed="allowed: [0, 0.5)"),
@@ -227,6 +227,16 @@ class ValidationTest(parameterized.TestCase):
     self.assertTrue(msg.startswith(key) and msg[len(key)] in " :",
                     f"message does not start with {key!r}: {msg}")
     self.assertIn(allowed, msg)
+
+  def test_too_stiff_names_the_substeps(self):
+    # 1e12 Pa at the paper's discretisation: c_p ~ 30 km/s, ~18,500
+    # substeps per frame, 11 million for 600 frames.
+    with self.assertRaisesRegex(
+        mpm.InputError, r"youngs_modulus = 1e\+12 .*allowed: \(0, 1e\+09\] "
+        r"Pa: .* 18,49\d substeps per frame, 11,0\d\d,\d{3} in all"):
+      mpm.Scene.from_dict({"material": {"youngs_modulus": 1e12}})
+    self.assertEqual(mpm.Scene.from_dict(
+        {"material": {"youngs_modulus": 1e9}}).material.youngs_modulus, 1e9)
 
   def test_invalid_json(self):
     with self.assertRaisesRegex(ValueError, "not valid JSON"):

@@ -1,0 +1,176 @@
+"""Every entry point refuses bad input in one line with exit code 2, before
+it creates anything (and before any compilation: each row takes seconds)."""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+from absl.testing import absltest
+from absl.testing import parameterized
+import numpy as np
+
+import mpm
+from mpm import io as mpm_io
+from tests.experiments import entry_points_test
+
+ROOT = entry_points_test.ROOT
+SMALL = "--config=experiments/configs/small.py"
+TEST = "--config=experiments/configs/test.py"
+_TEST_SPEC = {"num_train": 3, "num_test": 7, "num_frames": 20, "seed": 0,
+              "spacing": 0.01, "connectivity_radius": 0.03}
+
+
+def run(*args):
+  """Runs ``python -m args``; returns (returncode, stdout, stderr)."""
+  env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
+             GNSJAX_CACHE_DIR=os.path.join(ROOT, ".jax_cache"))
+  proc = subprocess.run([sys.executable, "-m", *args], env=env, cwd=ROOT,
+                        capture_output=True, text=True, timeout=120)
+  return proc.returncode, proc.stdout, proc.stderr
+
+
+# (name, module, argv, expected in the message). In argv, {d} is a fresh
+# directory holding: tiny.json (a valid tiny scene), stiff.json (the same
+# with E = 1e12 Pa), bad.json (an unknown obstacle shape), traj.h5 (a
+# 3-frame trajectory), a_file (a plain file), other/metadata.json (a finished
+# dataset of another config), parts/parts/spec.json (an unfinished one). No
+# row may create {d}/out, or anything else (item 9); every row answers in one
+# line with exit code 2 (item 10).
+ROWS = (
+    # Item 2: --compare is read, and a missing one is named.
+    ("render_missing_compare", "experiments.render",
+     ["--traj={d}/traj.h5", "--compare={d}/missing.h5", "--out={d}/out"],
+     "--compare={d}/missing.h5: no such file"),
+    ("render_not_a_trajectory", "experiments.render",
+     ["--traj={d}/tiny.json", "--out={d}/out"], "not a readable HDF5 file"),
+    # Item 3: another config's dataset, finished or not.
+    ("generate_into_another_dataset", "experiments.generate_dataset",
+     [TEST, "--out={d}/other", "--config.dataset.num_train=2"],
+     "holds a dataset of another config: its num_train 5 (this config: 2)"),
+    ("generate_into_other_parts", "experiments.generate_dataset",
+     [TEST, "--out={d}/parts"],
+     "holds an unfinished dataset of another config: its num_frames 8"),
+    ("generate_no_train", "experiments.generate_dataset",
+     [TEST, "--out={d}/out", "--config.dataset.num_train=0"],
+     "dataset.num_train = 0; allowed: an integer >= 1"),
+    ("verify_missing", "experiments.generate_dataset",
+     [TEST, "--out={d}/out", "--verify"],
+     "--out={d}/out: no such directory"),
+    # Item 4: an output that cannot be written is refused before simulating.
+    ("simulate_out_under_a_file", "experiments.simulate",
+     ["--scene={d}/tiny.json", "--out={d}/a_file/out/traj.h5"],
+     "--out={d}/a_file/out/traj.h5: {d}/a_file is a file"),
+    # Item 6: every flag named with its value and what is allowed.
+    ("render_frames_not_integers", "experiments.render",
+     ["--traj={d}/traj.h5", "--out={d}/out", "--frames=abc"],
+     "--frames=['abc']: expected comma-separated frame indices"),
+    ("render_frames_out_of_range", "experiments.render",
+     ["--traj={d}/traj.h5", "--out={d}/out", "--frames=0,50"],
+     "allowed: comma-separated frame indices in [0, 2]"),
+    ("render_index", "experiments.render",
+     ["--traj={d}/traj.h5", "--out={d}/out", "--index=1"],
+     "index=1: {d}/traj.h5 holds 1 trajectories; allowed: 0..0"),
+    ("rollout_max_trajectories", "experiments.rollout",
+     ["--workdir={d}", "--data={d}", "--out={d}/out", "--max_trajectories=0"],
+     "--max_trajectories=0"),
+    ("rollout_missing_workdir", "experiments.rollout",
+     ["--workdir={d}/run", "--data={d}", "--out={d}/out"],
+     "--workdir={d}/run: no such directory"),
+    ("evaluate_no_checkpoint", "experiments.evaluate",
+     ["--workdir={d}", "--data={d}", "--out={d}/out"],
+     "--workdir={d}: no checkpoints in it"),
+    ("train_missing_data", "experiments.train",
+     [SMALL, "--data={d}/data", "--workdir={d}/out"],
+     "--data={d}/data: no such directory"),
+    ("simulate_missing_scene", "experiments.simulate",
+     ["--scene={d}/missing.json", "--out={d}/out/traj.h5"],
+     "--scene={d}/missing.json: no such file"),
+    ("simulate_scene_and_seed", "experiments.simulate",
+     ["--scene={d}/tiny.json", "--seed=1", "--out={d}/out/traj.h5"],
+     "exactly one of --scene and --seed"),
+    ("simulate_bad_scene", "experiments.simulate",
+     ["--scene={d}/bad.json", "--out={d}/out/traj.h5"],
+     "obstacles[0].shape: unknown shape 'hexagon'"),
+    ("demo_num_frames", "experiments.demo",
+     ["--out={d}/out", "--num_frames=5"], "--num_frames=5"),
+    ("ablation_variants", "experiments.ablation",
+     ["--data={d}", "--out={d}/out", "--variants=nope"],
+     "--variants=nope: unknown ['nope']; allowed"),
+    ("benchmarks_what", "experiments.benchmarks",
+     ["--what=nope", "--out={d}/out"], "--what=nope"),
+    ("inverse_design_size", "experiments.inverse_design",
+     ["--out={d}/out", "--simulator=mpm", "--workdir=", "--size=abc"],
+     "--size=abc: a semicircle needs ['radius']"),
+    # Item 7: one range for --x0, below or above it.
+    ("inverse_design_x0_low", "experiments.inverse_design",
+     ["--out={d}/out", "--x0=0.3"], "--x0=0.3; allowed: [0.5, 1.3] m"),
+    ("inverse_design_x0_high", "experiments.inverse_design",
+     ["--out={d}/out", "--x0=1.6"], "--x0=1.6; allowed: [0.5, 1.3] m"),
+    # Item 8: a stiffness above the bound is refused with its cost.
+    ("simulate_too_stiff", "experiments.simulate",
+     ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],
+     "allowed: (0, 1e+09] Pa: it would need at least 9,246 substeps per "
+     "frame"),
+)
+
+
+class BadInputTest(parameterized.TestCase):
+
+  @classmethod
+  def setUpClass(cls):
+    super().setUpClass()
+    cls._tmp = tempfile.TemporaryDirectory()
+    d = cls.dir = cls._tmp.name
+    tiny = dict(entry_points_test.TINY_SCENE)
+    for name, scene in (
+        ("tiny", tiny),
+        ("stiff", {**tiny, "material": {"youngs_modulus": 1e12}}),
+        ("bad", {**tiny, "obstacles": [{"shape": "hexagon", "x": 0.2}]})):
+      with open(os.path.join(d, f"{name}.json"), "w") as f:
+        json.dump(scene, f)
+    scene = mpm.Scene.from_dict(tiny)
+    mpm_io.write_trajectories(os.path.join(d, "traj.h5"), [mpm_io.Trajectory(
+        np.full((3, 4, 2), 0.3, np.float32), np.zeros((1, 2), np.float32),
+        np.zeros(1, np.int32), scene)])
+    with open(os.path.join(d, "a_file"), "w") as f:
+      f.write("not a directory")
+    os.makedirs(os.path.join(d, "other"))
+    mpm_io.write_json(os.path.join(d, "other", "metadata.json"),
+                      {"spec": dict(_TEST_SPEC, num_train=5)})
+    os.makedirs(os.path.join(d, "parts", "parts"))
+    mpm_io.write_json(os.path.join(d, "parts", "parts", "spec.json"),
+                      dict(_TEST_SPEC, num_frames=8))
+
+  @classmethod
+  def tearDownClass(cls):
+    cls._tmp.cleanup()
+    super().tearDownClass()
+
+  @parameterized.named_parameters(*ROWS)
+  def test_refused(self, module, argv, expected):
+    before = sorted(os.listdir(self.dir))
+    code, stdout, stderr = run(module, *[a.format(d=self.dir) for a in argv])
+    self.assertEqual(code, 2, f"{stdout}\n{stderr}")
+    # One line, the message naming what was wrong; no traceback.
+    self.assertEqual(stderr.strip(), stderr.strip().splitlines()[0], stderr)
+    self.assertStartsWith(stderr, "error: ")
+    self.assertIn(expected.format(d=self.dir), stderr)
+    self.assertEqual(sorted(os.listdir(self.dir)), before)
+    self.assertFalse(os.path.exists(os.path.join(self.dir, "other", "parts")))
+    self.assertEqual(os.listdir(os.path.join(self.dir, "parts", "parts")),
+                     ["spec.json"])
+
+  def test_verbose_shows_the_traceback(self):
+    code, _, stderr = run("experiments.simulate",
+                          f"--scene={self.dir}/bad.json",
+                          f"--out={self.dir}/out/traj.h5", "--verbose")
+    self.assertNotEqual(code, 0)
+    self.assertIn("Traceback", stderr)
+    self.assertIn("mpm.scene.InputError: obstacles[0].shape", stderr)
+    self.assertFalse(os.path.exists(f"{self.dir}/out"))
+
+
+if __name__ == "__main__":
+  absltest.main()
