@@ -9,6 +9,12 @@ files (normalisation statistics from the training split only) and
 at any moment is resumed by running it again: finished parts are kept, half-
 written temporary files are discarded, nothing is duplicated.
 
+Worker processes die with the generator (even on kill -9), so none is left
+writing parts after it. One generator runs per directory at a time: it holds
+an exclusive ``flock`` on the directory, and a second one fails at once. Temp
+files carry their writer's pid, and a rerun removes only those whose writer
+is gone.
+
 The test split is planned so that the paper's breakdowns can be computed:
 obstacle count (0, 1, 2), particle count (700, 1000, 1500 at the paper's
 spacing), obstacle shape (semicircle, rectangle, and the triangle, which
@@ -17,12 +23,18 @@ trajectory records its ``group`` in the scene name.
 """
 
 import concurrent.futures
+import contextlib
+import ctypes
 import dataclasses
 import glob
 import json
 import multiprocessing
 import os
 import shutil
+import signal
+import sys
+import threading
+import time
 from typing import Callable, Sequence
 
 import jax
@@ -181,9 +193,85 @@ def check_target(spec: DatasetSpec, out_dir: str) -> None:
           "config")
 
 
-def _init_worker(cache_dir: str | None) -> None:
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _die_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
+  """Ends this worker process when the process ``parent_pid`` dies.
+
+  Linux: the kernel sends SIGKILL at the parent's death (PR_SET_PDEATHSIG).
+  Elsewhere a daemon thread polls ``os.getppid()``: an orphan is reparented.
+  """
+  if sys.platform.startswith("linux"):
+    try:
+      libc = ctypes.CDLL(None, use_errno=True)
+      ok = libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+      ok = False
+    if ok:
+      if os.getppid() != parent_pid:  # it died before prctl took effect
+        os._exit(1)  # pylint: disable=protected-access
+      return
+
+  def watch():
+    while os.getppid() == parent_pid:
+      time.sleep(poll_s)
+    os._exit(1)  # pylint: disable=protected-access
+
+  threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
+
+
+def _init_worker(cache_dir: str | None, parent_pid: int) -> None:
+  _die_with_parent(parent_pid)
   if cache_dir:
     jax.config.update("jax_compilation_cache_dir", cache_dir)
+
+
+def _pid_alive(pid: int) -> bool:
+  try:
+    os.kill(pid, 0)
+  except ProcessLookupError:
+    return False
+  except PermissionError:
+    return True  # someone else's process
+  return True
+
+
+def _remove_stale_temps(parts_dir: str) -> None:
+  """Removes temp files (``*.tmp-<pid>``) whose writer is no longer alive."""
+  for path in glob.glob(os.path.join(parts_dir, "*.tmp-*")):
+    pid = path.rsplit(".tmp-", 1)[1]
+    if not pid.isdigit() or not _pid_alive(int(pid)):
+      with contextlib.suppress(FileNotFoundError):
+        os.remove(path)  # half-written by a killed run
+
+
+class GeneratorBusyError(RuntimeError):
+  """Another generator holds the dataset directory."""
+
+
+@contextlib.contextmanager
+def _exclusive(out_dir: str):
+  """Holds an exclusive lock on the directory ``out_dir`` (POSIX flock).
+
+  The kernel releases it when the holder dies, however it dies.
+  """
+  try:
+    import fcntl  # pylint: disable=g-import-not-at-top
+  except ImportError:  # not POSIX: no lock
+    yield
+    return
+  fd = os.open(out_dir, os.O_RDONLY)
+  try:
+    try:
+      fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+      raise GeneratorBusyError(
+          f"{out_dir}: another generator is running on this directory; "
+          "wait for it (or kill it) and rerun") from None
+    yield
+  finally:
+    os.close(fd)
 
 
 def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
@@ -202,19 +290,28 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
 
   Raises:
     InputError: ``out_dir`` holds a dataset or parts of another spec.
+    GeneratorBusyError: another generator is running on ``out_dir``.
   """
   check_target(spec, out_dir)
   meta_path = os.path.join(out_dir, "metadata.json")
   if os.path.exists(meta_path):
     with open(meta_path) as f:
       return json.load(f)
+  os.makedirs(out_dir, exist_ok=True)
+  with _exclusive(out_dir):
+    if os.path.exists(meta_path):  # finished before we took the lock
+      with open(meta_path) as f:
+        return json.load(f)
+    return _generate(spec, out_dir, workers, progress, compilation_cache)
+
+
+def _generate(spec, out_dir, workers, progress, compilation_cache) -> dict:
   parts_dir = os.path.join(out_dir, "parts")
   os.makedirs(parts_dir, exist_ok=True)
   spec_path = os.path.join(parts_dir, _SPEC_FILE)
   if not os.path.exists(spec_path):
     mpm_io.write_json(spec_path, dataclasses.asdict(spec))
-  for stale in glob.glob(os.path.join(parts_dir, "*.tmp-*")):
-    os.remove(stale)  # half-written by a killed run
+  _remove_stale_temps(parts_dir)
   items = plan(spec)
   todo = [it for it in items
           if not _part_ok(os.path.join(parts_dir, it.part_name))]
@@ -231,7 +328,7 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
     context = multiprocessing.get_context("spawn")  # JAX is not fork-safe
     with concurrent.futures.ProcessPoolExecutor(
         workers, mp_context=context, initializer=_init_worker,
-        initargs=(compilation_cache,)) as pool:
+        initargs=(compilation_cache, os.getpid())) as pool:
       futures = [pool.submit(_simulate_part, it, parts_dir) for it in todo]
       for future in concurrent.futures.as_completed(futures):
         wall = future.result()

@@ -1,6 +1,7 @@
 """Tests for `mpm.dataset` and `mpm.io`: generation, resume, files, errors."""
 
 import dataclasses
+import glob
 import os
 import signal
 import subprocess
@@ -22,6 +23,27 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))
 
 def _positions(path):
   return [t.positions for t in mpm_io.read_trajectories(path)]
+
+
+def _children(pid):
+  """Pids of the live child processes of ``pid`` (Linux /proc)."""
+  out = set()
+  for path in glob.glob(f"/proc/{pid}/task/*/children"):
+    try:
+      with open(path) as f:
+        out.update(int(c) for c in f.read().split())
+    except OSError:
+      pass
+  return out
+
+
+def _alive(pid):
+  """Whether ``pid`` runs (a zombie, dead but not reaped, does not)."""
+  try:
+    with open(f"/proc/{pid}/stat") as f:
+      return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+  except OSError:
+    return False
 
 
 class DatasetTest(absltest.TestCase):
@@ -141,6 +163,48 @@ class DatasetTest(absltest.TestCase):
         for a, b in zip(got, ref):
           np.testing.assert_array_equal(a, b)
 
+  def test_kill_9_takes_the_workers_along_and_the_rerun_finishes(self):
+    with tempfile.TemporaryDirectory() as d:
+      script = (
+          "import dataclasses, os, sys\n"
+          "from mpm import dataset\n"
+          f"spec = dataset.DatasetSpec(**{dataclasses.asdict(SPEC)!r})\n"
+          "dataset.generate(spec, sys.argv[1], workers=2, compilation_cache="
+          "os.environ.get('GNSJAX_CACHE_DIR'))\n")
+      env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
+      proc = subprocess.Popen([sys.executable, "-c", script, d], env=env,
+                              stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+      parts = os.path.join(d, "parts")
+      deadline = time.time() + 120
+      workers = set()
+      while time.time() < deadline and proc.poll() is None:
+        workers |= _children(proc.pid)
+        if os.path.isdir(parts) and any(f.endswith(".h5")
+                                        for f in os.listdir(parts)):
+          break
+        time.sleep(0.05)
+      workers |= _children(proc.pid)
+      proc.send_signal(signal.SIGKILL)
+      proc.wait()
+      self.assertFalse(os.path.exists(os.path.join(d, "metadata.json")),
+                       "the generator finished before it could be killed")
+      self.assertGreaterEqual(len(workers), 2, "no worker processes seen")
+      deadline = time.time() + 10
+      while time.time() < deadline and any(map(_alive, workers)):
+        time.sleep(0.05)
+      self.assertEqual([p for p in workers if _alive(p)], [],
+                       "workers outlived the killed generator")
+      dataset.generate(SPEC, d, workers=2)
+      self.assertEqual(sorted(os.listdir(d)),
+                       ["metadata.json", "test.h5", "train.h5"])
+      for split in ("train.h5", "test.h5"):
+        got, ref = (_positions(os.path.join(d, split)),
+                    _positions(os.path.join(self.ref, split)))
+        self.assertEqual(len(got), len(ref))
+        for a, b in zip(got, ref):
+          np.testing.assert_array_equal(a, b)
+
   def test_verify_accepts_sound_and_reports_broken(self):
     self.assertEqual(dataset.verify(self.ref, reproduce=1), [])
     with tempfile.TemporaryDirectory() as d:
@@ -190,6 +254,29 @@ class OtherSpecTest(absltest.TestCase):
   def test_spec_values_are_checked(self):
     with self.assertRaisesRegex(ValueError, "dataset.num_test = 0; allowed"):
       dataclasses.replace(SPEC, num_test=0)
+
+
+class ExclusiveGenerationTest(absltest.TestCase):
+
+  def test_a_second_generator_on_the_same_directory_fails(self):
+    with tempfile.TemporaryDirectory() as d:
+      with dataset._exclusive(d):  # pylint: disable=protected-access
+        with self.assertRaisesRegex(dataset.GeneratorBusyError,
+                                    "another generator"):
+          dataset.generate(SPEC, d, workers=1)
+      self.assertEqual(os.listdir(d), [])
+
+  def test_only_temp_files_of_dead_writers_are_removed(self):
+    with tempfile.TemporaryDirectory() as d:
+      dead = subprocess.Popen([sys.executable, "-c", "pass"])
+      dead.wait()
+      live = os.path.join(d, f"train_00000.h5.tmp-{os.getpid()}")
+      stale = os.path.join(d, f"train_00001.h5.tmp-{dead.pid}")
+      for path in (live, stale):
+        with open(path, "wb") as f:
+          f.write(b"\x89HDF half written")
+      dataset._remove_stale_temps(d)  # pylint: disable=protected-access
+      self.assertEqual(os.listdir(d), [os.path.basename(live)])
 
 
 class FileErrorTest(absltest.TestCase):
