@@ -14,6 +14,12 @@ from mpm import boundary
 from mpm import constitutive
 from mpm import transfer
 
+# Nodes with less mass than this fraction of a particle's count as empty. They
+# move nothing measurably (a particle's weight on them is below it), but the
+# derivative -p / m^2 of their velocity overflows float32 below m ~ 5e-20 kg
+# and turns a zero cotangent into NaN (0 * inf) in the backward pass.
+_MIN_NODE_MASS = 1e-10
+
 
 @_pytree.pytree_dataclass
 class MPMState:
@@ -91,10 +97,8 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
             mass[:, None, None] * state.C)
   grid = transfer.p2g(st, mass, mass[:, None] * state.v, affine, spec.n_nodes)
 
-  node_mass = grid[:, 2:]
-  grid_v = jnp.where(node_mass > 0, grid[:, :2] / jnp.where(node_mass > 0,
-                                                           node_mass, 1.0),
-                     0.0) + dt * params.gravity[None, :]
+  grid_v = transfer.grid_velocity(grid, _MIN_NODE_MASS * jnp.max(mass))
+  grid_v = grid_v + dt * params.gravity[None, :]
   grid_v = boundary.apply(field, grid_v, params.boundary_friction,
                           params.wall_friction)
 

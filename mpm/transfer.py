@@ -121,6 +121,20 @@ def p2g(st: Stencil, mass: jax.Array, momentum: jax.Array, affine: jax.Array,
       values.reshape(-1, 3), mode="promise_in_bounds")
 
 
+def grid_velocity(grid: jax.Array, min_mass) -> jax.Array:
+  """Node velocities [G, 2] (m/s) of ``p2g``'s momentum and mass [G, 3].
+
+  Nodes with mass <= ``min_mass`` (kg, > 0) get zero velocity. The threshold
+  keeps the derivative of p / m finite: at a node that a particle's stencil
+  barely touches (weight ~1e-18), -p / m^2 overflows float32, and the
+  backward pass multiplies that inf by a zero cotangent into NaN. The double
+  ``where`` keeps the untaken division from producing inf or NaN.
+  """
+  mass = grid[:, 2:]
+  heavy = mass > min_mass
+  return jnp.where(heavy, grid[:, :2] / jnp.where(heavy, mass, 1.0), 0.0)
+
+
 def g2p(st: Stencil, grid_v: jax.Array, dx: float):
   """Grid to particle: velocity and APIC affine field.
 

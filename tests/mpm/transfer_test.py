@@ -159,5 +159,31 @@ class TransferTest(parameterized.TestCase):
     np.testing.assert_allclose(grid, grid_ref, atol=1e-5, rtol=0)
 
 
+class GridVelocityTest(absltest.TestCase):
+
+  def test_gradient_is_finite_at_nodes_a_stencil_barely_touches(self):
+    # Node 0: ordinary; node 1: 1e-25 kg, a particle's weight ~1e-24 (the
+    # README's heap meets such nodes after ~20 frames); node 2: empty.
+    grid = jnp.asarray([[0.3, -0.2, 0.5], [2e-25, 1e-25, 1e-25],
+                        [0.0, 0.0, 0.0]], jnp.float32)
+    min_mass = 1e-12
+    # With the old threshold (m > 0) the derivative -p / m^2 at node 1 is
+    # inf, and a zero cotangent makes it NaN.
+    naive = lambda g: jnp.where(g[:, 2:] > 0, g[:, :2] / jnp.where(
+        g[:, 2:] > 0, g[:, 2:], 1.0), 0.0)
+    ct = jnp.asarray([[1.0, 1.0], [0.0, 0.0], [0.0, 0.0]], jnp.float32)
+    self.assertFalse(np.all(np.isfinite(jax.vjp(naive, grid)[1](ct)[0])))
+
+    v, vjp = jax.vjp(lambda g: transfer.grid_velocity(g, min_mass), grid)
+    np.testing.assert_allclose(v, [[0.6, -0.4], [0.0, 0.0], [0.0, 0.0]],
+                               rtol=1e-6)
+    (g,) = vjp(ct)
+    self.assertTrue(np.all(np.isfinite(g)))
+    # d(p / m) = (dp - v dm) / m at the ordinary node; zero elsewhere.
+    np.testing.assert_allclose(g[0], [2.0, 2.0, -(0.6 - 0.4) / 0.5],
+                               rtol=1e-6)
+    np.testing.assert_array_equal(g[1:], 0.0)
+
+
 if __name__ == "__main__":
   absltest.main()
