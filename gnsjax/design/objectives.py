@@ -79,6 +79,12 @@ class Objective:
 NAMES = ("runout", "passed_fraction", "centroid")
 
 
+def _named(fn: Callable, name: str) -> Callable:
+  """``fn`` with ``__name__`` ``name`` (error messages name the objective)."""
+  fn.__name__ = fn.__qualname__ = name
+  return fn
+
+
 def make(name: str, *, x_protect: float = 0.6, target_x: float = 0.6,
          temperature: float | None = None) -> Objective:
   """The objective ``name`` with its parameters.
@@ -97,16 +103,16 @@ def make(name: str, *, x_protect: float = 0.6, target_x: float = 0.6,
   if name == "runout":
     tau = temperature or RUNOUT_TEMPERATURE
     return Objective(
-        name, lambda p: runout(p, tau),
+        name, _named(lambda p: runout(p, tau), name),
         lambda p: float(metrics.runout(p[0]) - metrics.runout(p[-1])), "m")
   if name == "passed_fraction":
     tau = temperature or FRACTION_TEMPERATURE
     return Objective(
-        name, lambda p: passed_fraction(p, x_protect, tau),
+        name, _named(lambda p: passed_fraction(p, x_protect, tau), name),
         lambda p: float(np.mean(np.asarray(p)[-1, :, 0] < x_protect)), "")
   if name == "centroid":
     return Objective(
-        name, lambda p: centroid(p, target_x),
+        name, _named(lambda p: centroid(p, target_x), name),
         lambda p: float((np.mean(np.asarray(p)[-1, :, 0]) - target_x)**2),
         "m^2")
   raise ValueError(f"objective: unknown {name!r}; allowed: {list(NAMES)}")

@@ -24,7 +24,10 @@ gradient; only the placement is differentiated.
 
 ``GNSDriver`` and ``MPMDriver`` are the host-side boundary: they jit those
 functions (module-level programs, every input an argument), check MPM frames
-(``mpm.check_frames``) and grow an overflowing neighbour list.
+(``mpm.check_frames``) and grow an overflowing neighbour list. A gradient
+that is not finite is an error (``FloatingPointError``) that names the scene
+and the first frame from which it is not finite: found by bisection over
+truncated rollouts, so it costs only when it fails.
 """
 
 import dataclasses
@@ -49,6 +52,36 @@ from mpm import transfer
 
 Params = placement_lib.Params
 Objective = Callable[[jax.Array], jax.Array]
+
+# -------------------------------------------------- non-finite gradients ---
+
+
+def _finite(tree) -> bool:
+  return all(np.all(np.isfinite(np.asarray(g))) for g in jax.tree.leaves(tree))
+
+
+def _first_bad(finite_at: Callable[[int], bool], n: int) -> int:
+  """The k in [1, n] where ``finite_at`` turns False, by bisection; assumes
+  finite_at(0) and not finite_at(n)."""
+  lo, hi = 0, n
+  while hi - lo > 1:
+    mid = (lo + hi) // 2
+    if finite_at(mid):
+      lo = mid
+    else:
+      hi = mid
+  return hi
+
+
+def _gradient_error(scene: mpm.Scene, objective: Objective, grad: Params,
+                    frame: int) -> FloatingPointError:
+  keys = [k for k, g in grad.items() if not np.all(np.isfinite(np.asarray(g)))]
+  name = getattr(objective, "__name__", None) or repr(objective)
+  return FloatingPointError(
+      f"scene {scene.name}: the gradient of {name} w.r.t. {', '.join(keys)} "
+      f"is not finite from frame {frame} (the rollout cut after frame "
+      f"{frame - 1} gives a finite one)")
+
 
 # ------------------------------------------------------------------- GNS ---
 
@@ -305,7 +338,24 @@ class GNSDriver:
     """
     value, grad, positions = self._run(_gns_value_and_grad, params,
                                        objective)
+    if not _finite(grad):
+      raise self._gradient_error(objective, params, grad)
     return float(value), grad, np.asarray(positions)
+
+  def _gradient_error(self, objective, params, grad) -> FloatingPointError:
+    """The error naming the first stored frame whose learned step makes the
+    gradient non-finite (rollouts truncated after s steps, bisected)."""
+    c, k = self.sim.window.shape[0], self.sim.frame_stride
+
+    def finite_at(steps):
+      sim = self.sim.replace(num_frames=(c - 1 + steps) * k + 1)
+      driver = GNSDriver(sim, self.model_params, self.nbrs)
+      _, g, _ = driver._run(_gns_value_and_grad, params, objective)
+      return _finite(g)
+
+    steps = _first_bad(finite_at, self.sim.n_steps)
+    return _gradient_error(self.placement.scene, objective, grad,
+                           (c - 1 + steps) * k)
 
 
 # ------------------------------------------------------------------- MPM ---
@@ -448,4 +498,16 @@ class MPMDriver:
     (value, (x, finite, max_speed)), grad = _mpm_value_and_grad(
         self.sim, params, objective)
     self._check(params, finite, max_speed)
+    if not _finite(grad):
+      raise self._gradient_error(objective, params, grad)
     return float(value), grad, np.asarray(x)
+
+  def _gradient_error(self, objective, params, grad) -> FloatingPointError:
+    """The error naming the first frame that makes the gradient non-finite
+    (rollouts truncated after k frames, bisected; a compilation each)."""
+    def finite_at(frames):
+      sim = self.sim.replace(num_frames=frames + 1)
+      return _finite(_mpm_value_and_grad(sim, params, objective)[1])
+
+    return _gradient_error(self.placement.scene, objective, grad,
+                           _first_bad(finite_at, self.sim.num_frames - 1))
