@@ -163,5 +163,55 @@ class GNSRolloutTest(absltest.TestCase):
     refuse.assert_not_called()
 
 
+class NonFiniteGradientTest(absltest.TestCase):
+
+  def test_error_names_the_scene_and_the_frame(self):
+    p = Placement(scene(num_frames=6))
+    sim = rollouts.MPMDriver(rollouts.MPMRollout.create(p))
+    params = p.initial()
+    y = sim.rollout(params)[:, :, 1]                     # [T, N] (m)
+    # A falling particle that crosses a height between frames 2 and 3:
+    # sqrt(max(y - h, 0)) has an infinite derivative there (NaN after max).
+    frame = 3
+    i = int(np.argmax(y[frame - 1] - y[frame]))
+    h = float(y[frame - 1, i] + y[frame, i]) / 2
+    self.assertTrue(np.all(y[:frame, i] > h) and y[frame, i] < h)
+
+    def broken(x):
+      return jnp.mean(x[-1, :, 0]) + jnp.sum(
+          jnp.sqrt(jnp.maximum(x[:, i, 1] - h, 0.0)))
+
+    with self.assertRaisesRegex(
+        FloatingPointError, r"scene design_test: the gradient of broken "
+        rf"w.r.t. x is not finite from frame {frame}\b"):
+      sim.value_and_grad(broken, params)
+
+  def test_gns_error_names_the_scene_and_the_frame(self):
+    p = Placement(scene())
+    driver = tiny_gns(p, num_frames=C + 4)
+    params = p.initial()
+    # The untrained model moves the sand at random: take the coordinate
+    # (particle i, axis a, sign s) that first leaves its range at the
+    # second learned step, and put h between.
+    frame = C + 1
+    x = driver.rollout(params)                           # [T, Ns, 2] (m)
+    u = np.stack([x, -x])                                # [2, T, Ns, 2]
+    margin = np.min(u[:, :frame], 1) - u[:, frame]       # [2, Ns, 2]
+    sign, i, a = np.unravel_index(np.argmax(margin), margin.shape)
+    s = 1.0 - 2.0 * sign
+    h = float(np.min(u[sign, :frame, i, a]) + u[sign, frame, i, a]) / 2
+    self.assertTrue(np.all(u[sign, :frame, i, a] > h) and
+                    u[sign, frame, i, a] < h)
+
+    def broken(x):
+      return jnp.mean(x[-1, :, 0]) + jnp.sum(
+          jnp.sqrt(jnp.maximum(s * x[:, i, a] - h, 0.0)))
+
+    with self.assertRaisesRegex(
+        FloatingPointError, r"scene design_test: the gradient of broken "
+        rf"w.r.t. x is not finite from frame {frame}\b"):
+      driver.value_and_grad(broken, params)
+
+
 if __name__ == "__main__":
   absltest.main()
