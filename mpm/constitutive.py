@@ -60,7 +60,10 @@ def _atanh_ratio(z2):
   """atanh(z) / z as a smooth function of z^2 in [0, 1)."""
   small = z2 < 1e-2
   series = 1 + z2 * (1 / 3 + z2 * (1 / 5 + z2 * (1 / 7 + z2 / 9)))
-  z = jnp.sqrt(jnp.where(small, 1.0, z2))
+  # A safe value inside (0, 1): at z = 1 the untaken branch's atanh and its
+  # derivative are infinite, and the backward pass forms 0 * inf = NaN
+  # (masked by the inner where, but checkify flags it and fusion may not).
+  z = jnp.sqrt(jnp.where(small, 0.25, z2))
   return jnp.where(small, series, jnp.arctanh(z) / z)
 
 
