@@ -279,6 +279,39 @@ class ExclusiveGenerationTest(absltest.TestCase):
       self.assertEqual(os.listdir(d), [os.path.basename(live)])
 
 
+class WorkerLifetimeTest(absltest.TestCase):
+
+  def test_watchdog_ends_an_orphan_where_prctl_is_missing(self):
+    child = (
+        "import sys, time\n"
+        "from mpm import dataset\n"
+        "sys.platform = 'darwin'  # no prctl: the watchdog thread\n"
+        "dataset._die_with_parent(int(sys.argv[1]), poll_s=0.05)\n"
+        "print('ready', flush=True)\n"
+        "time.sleep(60)\n")
+    parent = (
+        "import os, subprocess, sys\n"
+        f"child = subprocess.Popen([sys.executable, '-c', {child!r}, "
+        "str(os.getpid())])\n"
+        "print(child.pid, flush=True)\n"
+        "child.wait()\n")
+    env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
+    proc = subprocess.Popen([sys.executable, "-c", parent], env=env,
+                            stdout=subprocess.PIPE, text=True)
+    child_pid = int(proc.stdout.readline())
+    self.assertEqual(proc.stdout.readline().strip(), "ready")
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    proc.stdout.close()
+    deadline = time.time() + 5
+    while time.time() < deadline and _alive(child_pid):
+      time.sleep(0.05)
+    alive = _alive(child_pid)
+    if alive:
+      os.kill(child_pid, signal.SIGKILL)
+    self.assertFalse(alive, "the orphan outlived its parent")
+
+
 class FileErrorTest(absltest.TestCase):
 
   def setUp(self):
