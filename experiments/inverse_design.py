@@ -60,6 +60,19 @@ _OPTIMISE_SIZE = flags.DEFINE_bool(
     "ranges).")
 
 
+_METHOD = flags.DEFINE_enum(
+    "method", "adam", ["adam", "adam_smoothed"],
+    "adam: plain gradients; adam_smoothed: gradients of the objective "
+    "smoothed at --sigma (MPM only; docs/inverse_design.md).")
+_SIGMA = flags.DEFINE_float("sigma", 0.05, "Smoothing scale (m) of "
+                            "adam_smoothed.", lower_bound=1e-6)
+_SAMPLES = flags.DEFINE_integer(
+    "num_samples", 16, "Perturbed designs per smoothed gradient (even).",
+    lower_bound=2)
+_ESTIMATOR = flags.DEFINE_enum("estimator", "score", ["score", "pathwise"],
+                               "Estimator of the smoothed gradient.")
+
+
 def _check_inputs() -> None:
   """Refuses bad flags before anything is created or compiled: the design
   range of x is one range, whether x comes from --x0 or --scene."""
@@ -98,6 +111,13 @@ def _check_inputs() -> None:
   if _TEMPERATURE.value is not None and not _TEMPERATURE.value > 0:
     raise runtime.InputError(f"--temperature={_TEMPERATURE.value:g}; "
                              "allowed: > 0 (m)")
+  if _METHOD.value == "adam_smoothed":
+    if _SIMULATOR.value != "mpm":
+      raise runtime.InputError("--method=adam_smoothed runs on the MPM; "
+                               "allowed: --simulator=mpm")
+    if _SAMPLES.value % 2:
+      raise runtime.InputError(f"--num_samples={_SAMPLES.value}; allowed: "
+                               "an even number >= 2 (antithetic pairs)")
   if _WORKDIR.value:
     runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
   elif _SIMULATOR.value == "gns":
@@ -119,7 +139,9 @@ def main(argv):
       target_x=_TARGET_X.value, temperature=_TEMPERATURE.value,
       workdir=_WORKDIR.value, steps=_STEPS.value,
       learning_rate=_LR.value, sweep_points=_SWEEP.value,
-      optimise_size=_OPTIMISE_SIZE.value)
+      optimise_size=_OPTIMISE_SIZE.value, method=_METHOD.value,
+      sigma=_SIGMA.value, num_samples=_SAMPLES.value,
+      estimator=_ESTIMATOR.value)
   print(f"improved under the MPM: {summary['improved_under_mpm']}; "
         f"report: {_OUT.value}/report.md")
 

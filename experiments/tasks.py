@@ -260,7 +260,9 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
                    temperature: float | None = None,
                    workdir: str | None = PRETRAINED, steps: int = 8,
                    learning_rate: float = 0.05, sweep_points: int = 9,
-                   optimise_size: bool = False) -> dict:
+                   optimise_size: bool = False, method: str = "adam",
+                   sigma: float = 0.05, num_samples: int = 16,
+                   estimator: str = "score") -> dict:
   """The inverse-design study (``gnsjax.design.study.study``) of a scene,
   with its plot ``objective_vs_x.png``; returns the summary."""
   from gnsjax.design import objectives  # pylint: disable=g-import-not-at-top
@@ -274,7 +276,9 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
   result = study.study(
       out_dir, scene, obj, simulator=simulator, workdir=workdir or None,
       steps=steps, learning_rate=learning_rate, sweep_points=sweep_points,
-      optimise_size=optimise_size, log=lambda line: tqdm.tqdm.write(line))
+      optimise_size=optimise_size, method=method, sigma=sigma,
+      num_samples=num_samples, estimator=estimator,
+      log=lambda line: tqdm.tqdm.write(line))
   figures.objective_vs_x(result.sweep, result.history, obj.name, simulator,
                          os.path.join(out_dir, "objective_vs_x.png"))
   return result.summary

@@ -149,3 +149,39 @@ def mpm_smoothed_value_and_grad(sim: rollouts.MPMRollout, objective,
         f"{sim.placement.scene.name}: the smoothed ({estimator}) objective or "
         f"its gradient at {jax.tree.map(np.asarray, params)} is not finite")
   return float(value), grad, stderr
+
+
+class SmoothedMPMDriver:
+  """An ``MPMDriver`` whose gradients are smoothed (for ``optimize.optimise``).
+
+  ``value_and_grad`` returns the smoothed objective F_sigma and its
+  estimated gradient; each call draws new perturbations (the key is the
+  seed folded with the call count, so a run is reproducible).
+  """
+
+  def __init__(self, driver: rollouts.MPMDriver, *, sigma,
+               num_samples: int = 16, estimator: str = "score",
+               seed: int = 0):
+    if estimator not in ESTIMATORS:
+      raise ValueError(f"estimator = {estimator!r}; allowed: {ESTIMATORS}")
+    perturbations(jax.random.key(0), {"x": jnp.float32(0)}, num_samples)
+    self.driver, self.sigma = driver, sigma
+    self.num_samples, self.estimator = num_samples, estimator
+    self._key, self._calls = jax.random.key(seed), 0
+
+  @property
+  def placement(self) -> placement_lib.Placement:
+    return self.driver.placement
+
+  def rollout(self, params: Params) -> np.ndarray:
+    return self.driver.rollout(params)
+
+  def value_and_grad(self, objective, params: Params
+                     ) -> tuple[float, Params, np.ndarray]:
+    """(F_sigma, its gradient estimate, positions [T, N, 2] at ``params``)."""
+    key = jax.random.fold_in(self._key, self._calls)
+    self._calls += 1
+    value, grad, _ = mpm_smoothed_value_and_grad(
+        self.driver.sim, objective, params, key, sigma=self.sigma,
+        num_samples=self.num_samples, estimator=self.estimator)
+    return value, grad, self.driver.rollout(params)

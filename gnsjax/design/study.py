@@ -24,9 +24,11 @@ from gnsjax.design import objectives
 from gnsjax.design import optimize
 from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
+from gnsjax.design import smoothing
 from mpm import io as mpm_io
 
 SIMULATORS = ("gns", "mpm")
+METHODS = ("adam", "adam_smoothed")
 
 
 class StudyResult(NamedTuple):
@@ -54,6 +56,8 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
           simulator: str = "gns", workdir: str | None = None,
           steps: int = 8, learning_rate: float = 0.05,
           sweep_points: int = 9, optimise_size: bool = False,
+          method: str = "adam", sigma: float = 0.05, num_samples: int = 16,
+          estimator: str = "score",
           log: Callable[[str], None] = print) -> StudyResult:
   """Optimises the first obstacle's x of ``scene`` and checks the result.
 
@@ -68,6 +72,9 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
     sweep_points: x values of the brute-force sweep over the range.
     optimise_size: optimise the obstacle's size too (within Table 1's
       ranges); the sweep stays over x at the starting size.
+    method: "adam" on plain gradients, or "adam_smoothed" on gradients of
+      the objective smoothed at scale ``sigma`` (m; ``smoothing``, with
+      ``num_samples`` perturbed designs and ``estimator``; MPM only).
   """
   if simulator not in SIMULATORS:
     raise ValueError(f"simulator: unknown {simulator!r}; allowed: "
@@ -84,6 +91,16 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
         run.params)
   if simulator not in sims:
     raise ValueError("simulator='gns' needs the trained model's workdir")
+  if method not in METHODS:
+    raise ValueError(f"method: unknown {method!r}; allowed: {list(METHODS)}")
+  driver = sims[simulator]
+  if method == "adam_smoothed":
+    if simulator != "mpm":
+      raise ValueError("method='adam_smoothed' runs on the MPM; allowed "
+                       "simulator: 'mpm'")
+    driver = smoothing.SmoothedMPMDriver(driver, sigma=sigma,
+                                         num_samples=num_samples,
+                                         estimator=estimator)
 
   def log_record(r):
     log(f"iteration {r['iteration']}: x = {r['x']:.4f} m, "
@@ -92,7 +109,7 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
 
   os.makedirs(out_dir, exist_ok=True)  # once the inputs are known good
   start = placement.initial()
-  history = optimize.optimise(sims[simulator], objective.smooth, start,
+  history = optimize.optimise(driver, objective.smooth, start,
                               steps=steps, learning_rate=learning_rate,
                               log=log_record)
   _write_csv(os.path.join(out_dir, "history.csv"), history)
@@ -126,6 +143,9 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
   summary = {
       "scene": scene.to_dict(), "objective": objective.name,
       "unit": objective.unit, "simulator": simulator, "steps": steps,
+      "method": method, **({"sigma": sigma, "num_samples": num_samples,
+                            "estimator": estimator}
+                           if method == "adam_smoothed" else {}),
       "learning_rate": learning_rate,
       "optimiser": {
           "best_x": best["x"], "best_objective": best["objective"],
@@ -153,7 +173,10 @@ def report(summary: dict) -> str:
   unit = f" {summary['unit']}" if summary["unit"] else ""
   lines = [
       f"# Inverse design: {summary['objective']}", "",
-      f"Adam on {summary['simulator'].upper()} gradients, "
+      f"Adam on {summary['simulator'].upper()} gradients"
+      + (f" smoothed at sigma = {summary['sigma']:g} m ({summary['estimator']}"
+         f", {summary['num_samples']} samples)"
+         if summary.get("method") == "adam_smoothed" else "") + ", "
       f"{o['gradient_evaluations']} gradient evaluations in "
       f"{o['seconds']:.1f} s ({o['seconds_after_first']:.1f} s after the "
       f"first, which compiles): best x = {o['best_x']:.4f} m, smooth "

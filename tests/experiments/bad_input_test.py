@@ -108,6 +108,12 @@ ROWS = (
      ["--out={d}/out", "--x0=0.3"], "--x0=0.3; allowed: [0.5, 1.3] m"),
     ("inverse_design_x0_high", "experiments.inverse_design",
      ["--out={d}/out", "--x0=1.6"], "--x0=1.6; allowed: [0.5, 1.3] m"),
+    ("inverse_design_smoothed_gns", "experiments.inverse_design",
+     ["--out={d}/out", "--method=adam_smoothed"],
+     "--method=adam_smoothed runs on the MPM; allowed: --simulator=mpm"),
+    ("gradient_check_xs", "experiments.gradient_check",
+     ["--out={d}/out", "--xs=0.52"],
+     "--xs: [0.52] with --sigma=0.05: x +- sigma must lie in [0.5, 1.3] m"),
     # Item 8: a stiffness above the bound is refused with its cost.
     ("simulate_too_stiff", "experiments.simulate",
      ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],

@@ -10,6 +10,7 @@ import numpy as np
 
 from gnsjax.design import gradient_check
 from gnsjax.design import objectives
+from gnsjax.design import optimize
 from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
 from gnsjax.design import smoothing
@@ -133,6 +134,22 @@ class MPMSmoothingTest(absltest.TestCase):
         self.sim, self.objective, params, KEY, sigma=1e-4, num_samples=2)
     np.testing.assert_allclose(float(smooth["x"]), float(plain["x"]),
                                rtol=0.05)
+
+  def test_adam_on_smoothed_gradients(self):
+    driver = smoothing.SmoothedMPMDriver(rollouts.MPMDriver(self.sim),
+                                         sigma=0.01, num_samples=2)
+    history = optimize.optimise(driver, self.objective, {"x": jnp.float32(X)},
+                                steps=2, learning_rate=0.01)
+    self.assertLen(history, 2)
+    lo, hi = self.placement.x_range
+    for r in history:
+      self.assertTrue(np.isfinite(r["objective"]) and np.isfinite(r["grad_x"]))
+      self.assertBetween(r["x"], lo, hi)
+    # Each call draws new perturbations (reproducibly from the seed).
+    again = smoothing.SmoothedMPMDriver(rollouts.MPMDriver(self.sim),
+                                        sigma=0.01, num_samples=2)
+    first = again.value_and_grad(self.objective, {"x": jnp.float32(X)})
+    self.assertEqual(first[0], history[0]["objective"])
 
   def test_perturbed_designs_stay_in_range_at_the_edge(self):
     # At the top of the allowed range half the perturbed designs would leave
