@@ -154,14 +154,18 @@ class DatasetTest(absltest.TestCase):
                        progress=lambda done, total, wall: calls.append(done))
       self.assertEqual(calls[0], len(done_before),
                        "finished parts from the killed run were redone")
-      self.assertEqual(sorted(os.listdir(d)),
-                       ["metadata.json", "test.h5", "train.h5"])
-      for split in ("train.h5", "test.h5"):
-        got, ref = (_positions(os.path.join(d, split)),
-                    _positions(os.path.join(self.ref, split)))
-        self.assertEqual(len(got), len(ref))
-        for a, b in zip(got, ref):
-          np.testing.assert_array_equal(a, b)
+      self._assert_equals_reference(d)
+
+  def _assert_equals_reference(self, d):
+    """The dataset in ``d`` is the uninterrupted run's, bit for bit."""
+    self.assertEqual(sorted(os.listdir(d)),
+                     ["metadata.json", "test.h5", "train.h5"])
+    for split in ("train.h5", "test.h5"):
+      got, ref = (_positions(os.path.join(d, split)),
+                  _positions(os.path.join(self.ref, split)))
+      self.assertEqual(len(got), len(ref))
+      for a, b in zip(got, ref):
+        np.testing.assert_array_equal(a, b)
 
   def test_kill_9_takes_the_workers_along_and_the_rerun_finishes(self):
     with tempfile.TemporaryDirectory() as d:
@@ -196,14 +200,7 @@ class DatasetTest(absltest.TestCase):
       self.assertEqual([p for p in workers if _alive(p)], [],
                        "workers outlived the killed generator")
       dataset.generate(SPEC, d, workers=2)
-      self.assertEqual(sorted(os.listdir(d)),
-                       ["metadata.json", "test.h5", "train.h5"])
-      for split in ("train.h5", "test.h5"):
-        got, ref = (_positions(os.path.join(d, split)),
-                    _positions(os.path.join(self.ref, split)))
-        self.assertEqual(len(got), len(ref))
-        for a, b in zip(got, ref):
-          np.testing.assert_array_equal(a, b)
+      self._assert_equals_reference(d)
 
   def test_verify_accepts_sound_and_reports_broken(self):
     self.assertEqual(dataset.verify(self.ref, reproduce=1), [])
