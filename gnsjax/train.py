@@ -41,7 +41,11 @@ from gnsjax import run as run_lib
 from gnsjax import simulator
 from mpm import geometry as mpm_geometry
 from mpm import io as mpm_io
+from mpm import scene as mpm_scene
 
+# A config or checkpoint the user gave is wrong: entry points report it in one
+# line (experiments.runtime).
+InputError = mpm_scene.InputError
 
 # The run's pieces, defined in gnsjax.run; training creates and stores them.
 Problem = run_lib.Problem
@@ -97,38 +101,38 @@ _OTHER_TOP_LEVEL = ("dataset", "workers", "log_every")
 
 
 def check_config(config) -> None:
-  """Raises ValueError naming any unknown or missing key."""
+  """Raises InputError (a ValueError) naming any unknown or missing key."""
   top = set(config.keys())
   allowed = set(CONFIG_KEYS) | set(_OTHER_TOP_LEVEL)
   if top - allowed:
-    raise ValueError(f"config: unknown key(s) {sorted(top - allowed)}; "
+    raise InputError(f"config: unknown key(s) {sorted(top - allowed)}; "
                      f"allowed: {sorted(allowed)}")
   for section, keys in CONFIG_KEYS.items():
     if section not in top:
-      raise ValueError(f"config: missing section '{section}' with keys "
+      raise InputError(f"config: missing section '{section}' with keys "
                        f"{list(keys)}")
     present = set(config[section].keys())
     if present - set(keys):
-      raise ValueError(f"config.{section}: unknown key(s) "
+      raise InputError(f"config.{section}: unknown key(s) "
                        f"{sorted(present - set(keys))}; allowed: {list(keys)}")
     if set(keys) - present:
-      raise ValueError(f"config.{section}: missing key(s) "
+      raise InputError(f"config.{section}: missing key(s) "
                        f"{sorted(set(keys) - present)}")
   if config.train.input_frames < 2:
-    raise ValueError(f"config.train.input_frames = "
+    raise InputError(f"config.train.input_frames = "
                      f"{config.train.input_frames}; allowed: >= 2")
   stride = config.train.frame_stride
   if int(stride) != stride or stride < 1:
-    raise ValueError(f"config.train.frame_stride = {stride}; allowed: an "
+    raise InputError(f"config.train.frame_stride = {stride}; allowed: an "
                      "integer >= 1")
   if config.train.pushforward_steps < 0 or not (
       0.0 <= config.train.pushforward_probability <= 1.0):
-    raise ValueError("config.train.pushforward_steps = "
+    raise InputError("config.train.pushforward_steps = "
                      f"{config.train.pushforward_steps}, pushforward_"
                      f"probability = {config.train.pushforward_probability}; "
                      "allowed: steps >= 0, probability 0 to 1")
   if not 0.0 <= config.train.motion_weighting <= 1.0:
-    raise ValueError(f"config.train.motion_weighting = "
+    raise InputError(f"config.train.motion_weighting = "
                      f"{config.train.motion_weighting}; allowed: 0 to 1")
 
 
@@ -153,7 +157,7 @@ def check_compatible(stored: dict, config) -> None:
        current.get("dataset", {}).get(k)) for k in _DATA_PHYSICS]
   for where, old, new in pairs:
     if old != new:
-      raise ValueError(
+      raise InputError(
           f"the checkpoint was trained with another config: its '{where}' is "
           f"{old}, this config has {new}; use a new --workdir or the same "
           "config")
@@ -377,7 +381,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   os.makedirs(workdir, exist_ok=True)
   cfg, tcfg = config, config.train
   if tcfg.batch_size % jax.local_device_count():
-    raise ValueError(f"train.batch_size = {tcfg.batch_size} must be a "
+    raise InputError(f"train.batch_size = {tcfg.batch_size} must be a "
                      f"multiple of the {jax.local_device_count()} devices")
   mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
                             cfg.checkpoint.named_steps, cfg.checkpoint.keep)
@@ -410,7 +414,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   device_windows = None
   if tcfg.device_windows:
     if problem.boundary_particles:
-      raise ValueError("config.train.device_windows = True needs "
+      raise InputError("config.train.device_windows = True needs "
                        "config.model.boundary_particles = False (boundary "
                        "particles are chosen per window on the host)")
     device_windows = batching.DeviceWindows(

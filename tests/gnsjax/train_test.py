@@ -13,6 +13,7 @@ from absl.testing import absltest
 import jax
 import numpy as np
 
+import mpm
 from gnsjax import checkpoint
 from gnsjax import data
 from gnsjax import features
@@ -159,7 +160,9 @@ class TrainTest(absltest.TestCase):
     train.train_and_evaluate(config, self.data, self.dir)
     other = fixtures.tiny_config(num_steps=4)
     other.model.latent_size = 8
-    with self.assertRaisesRegex(ValueError, "trained with another config"):
+    # InputError: the entry point reports it in one line (exit code 2).
+    with self.assertRaisesRegex(mpm.InputError,
+                                "trained with another config"):
       train.train_and_evaluate(other, self.data, self.dir)
     nostats = os.path.join(self.dir, "nostats")
     os.makedirs(nostats)
