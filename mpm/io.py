@@ -1,4 +1,4 @@
-"""Trajectory files (HDF5), in the layout DESIGN.md fixes.
+"""Trajectory files (HDF5), in the layout of docs/dataset.md ("Files").
 
 Root attributes: ``format_version``, ``dim``, ``frame_dt``, ``bounds``
 ([[x_min, x_max], [y_min, y_max]]), ``connectivity_radius``,
@@ -192,7 +192,8 @@ def write_group(f: h5py.File, name: str, t: Trajectory) -> None:
   """Writes one trajectory as group ``name``."""
   g = f.create_group(name)
   # Uncompressed, chunked by frame: float32 positions barely compress and a
-  # random 7-frame window then reads in ~0.1 ms (DESIGN.md).
+  # random 7-frame window then reads in ~0.1 ms (measured on the development
+  # CPU).
   g.create_dataset("positions", data=np.asarray(t.positions, np.float32),
                    chunks=(1,) + t.positions.shape[1:])
   g.create_dataset("particle_type", data=np.asarray(t.particle_type,

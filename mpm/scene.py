@@ -1,4 +1,5 @@
-"""Scene description: the JSON contract of DESIGN.md as frozen dataclasses.
+"""Scene description: the JSON scene file (docs/physics.md, section 2) as
+frozen dataclasses.
 
 A :class:`Scene` says everything one MPM run needs: the domain box, the ramp
 profile, the obstacles standing on it, where the sand starts, the material, the
@@ -137,7 +138,7 @@ class Solver:
 
 @dataclasses.dataclass(frozen=True)
 class Scene:
-  """One MPM run. See DESIGN.md, "Scene file", for the JSON form."""
+  """One MPM run. See docs/physics.md, section 2, for the JSON form."""
   domain: Domain = Domain()
   ramp: Ramp = Ramp()
   obstacles: tuple[Obstacle, ...] = ()
