@@ -42,7 +42,8 @@ def assert_same_problem(test, got: train.Problem, want: train.Problem):
                    dataclasses.replace(want, stats=None, bounds=None))
 
 
-class TrainTest(absltest.TestCase):
+class TinyRunTestCase(absltest.TestCase):
+  """A temporary work directory and the tiny dataset."""
 
   def setUp(self):
     super().setUp()
@@ -50,6 +51,9 @@ class TrainTest(absltest.TestCase):
     self.addCleanup(tmp.cleanup)
     self.dir = tmp.name
     self.data = fixtures.tiny_dataset()
+
+
+class TrainTest(TinyRunTestCase):
 
   def test_overfits_a_tiny_dataset(self):
     steps = 300
@@ -229,16 +233,9 @@ class ProblemTest(absltest.TestCase):
         train.check_config(fixtures.tiny_config(**{key: value}))
 
 
-class PushforwardTest(absltest.TestCase):
+class PushforwardTest(TinyRunTestCase):
 
   P = 2
-
-  def setUp(self):
-    super().setUp()
-    tmp = tempfile.TemporaryDirectory()
-    self.addCleanup(tmp.cleanup)
-    self.dir = tmp.name
-    self.data = fixtures.tiny_dataset()
 
   def test_probability_zero_changes_nothing(self):
     losses = {}

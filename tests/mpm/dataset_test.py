@@ -114,33 +114,41 @@ class DatasetTest(absltest.TestCase):
   def test_deterministic(self):
     with tempfile.TemporaryDirectory() as d:
       dataset.generate(SPEC, d, workers=1)
-      for split in ("train.h5", "test.h5"):
-        for a, b in zip(_positions(os.path.join(d, split)),
-                        _positions(os.path.join(self.ref, split))):
-          np.testing.assert_array_equal(a, b)
+      self._assert_equals_reference(d)
+
+  def _kill_after_first_part(self, d: str, workers: int) -> set[int]:
+    """Runs a generator into ``d`` in a subprocess, SIGKILLs it once its
+    first part is written, and returns the pids of the children seen."""
+    script = (
+        "import dataclasses, os, sys\n"
+        "from mpm import dataset\n"
+        f"spec = dataset.DatasetSpec(**{dataclasses.asdict(SPEC)!r})\n"
+        f"dataset.generate(spec, sys.argv[1], workers={workers}, "
+        "compilation_cache=os.environ.get('GNSJAX_CACHE_DIR'))\n")
+    env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
+    proc = subprocess.Popen([sys.executable, "-c", script, d], env=env,
+                            stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    parts = os.path.join(d, "parts")
+    deadline = time.time() + 120
+    children = set()
+    while time.time() < deadline and proc.poll() is None:
+      children |= _children(proc.pid)
+      if os.path.isdir(parts) and any(f.endswith(".h5")
+                                      for f in os.listdir(parts)):
+        break
+      time.sleep(0.05)
+    children |= _children(proc.pid)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    self.assertFalse(os.path.exists(os.path.join(d, "metadata.json")),
+                     "the generator finished before it could be killed")
+    return children
 
   def test_resume_after_kill_and_half_written_files(self):
     with tempfile.TemporaryDirectory() as d:
-      script = (
-          "import dataclasses, sys\n"
-          "from mpm import dataset\n"
-          f"spec = dataset.DatasetSpec(**{dataclasses.asdict(SPEC)!r})\n"
-          "dataset.generate(spec, sys.argv[1], workers=1)\n")
-      env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
-      proc = subprocess.Popen([sys.executable, "-c", script, d], env=env,
-                              stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+      self._kill_after_first_part(d, workers=1)
       parts = os.path.join(d, "parts")
-      deadline = time.time() + 120
-      while time.time() < deadline and proc.poll() is None:
-        if os.path.isdir(parts) and any(f.endswith(".h5")
-                                        for f in os.listdir(parts)):
-          break
-        time.sleep(0.05)
-      proc.send_signal(signal.SIGKILL)
-      proc.wait()
-      self.assertFalse(os.path.exists(os.path.join(d, "metadata.json")),
-                       "the writer finished before it could be killed")
       # What a kill mid-write leaves: a temporary file and (had the rename
       # not been atomic) a truncated part. Both must be redone.
       with open(os.path.join(parts, "test_00001.h5.tmp-12345"), "wb") as f:
@@ -169,30 +177,7 @@ class DatasetTest(absltest.TestCase):
 
   def test_kill_9_takes_the_workers_along_and_the_rerun_finishes(self):
     with tempfile.TemporaryDirectory() as d:
-      script = (
-          "import dataclasses, os, sys\n"
-          "from mpm import dataset\n"
-          f"spec = dataset.DatasetSpec(**{dataclasses.asdict(SPEC)!r})\n"
-          "dataset.generate(spec, sys.argv[1], workers=2, compilation_cache="
-          "os.environ.get('GNSJAX_CACHE_DIR'))\n")
-      env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
-      proc = subprocess.Popen([sys.executable, "-c", script, d], env=env,
-                              stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
-      parts = os.path.join(d, "parts")
-      deadline = time.time() + 120
-      workers = set()
-      while time.time() < deadline and proc.poll() is None:
-        workers |= _children(proc.pid)
-        if os.path.isdir(parts) and any(f.endswith(".h5")
-                                        for f in os.listdir(parts)):
-          break
-        time.sleep(0.05)
-      workers |= _children(proc.pid)
-      proc.send_signal(signal.SIGKILL)
-      proc.wait()
-      self.assertFalse(os.path.exists(os.path.join(d, "metadata.json")),
-                       "the generator finished before it could be killed")
+      workers = self._kill_after_first_part(d, workers=2)
       self.assertGreaterEqual(len(workers), 2, "no worker processes seen")
       deadline = time.time() + 10
       while time.time() < deadline and any(map(_alive, workers)):
