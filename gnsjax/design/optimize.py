@@ -17,6 +17,7 @@ import numpy as np
 import optax
 
 from gnsjax.design import placement as placement_lib
+from gnsjax.design import rollouts
 
 Params = placement_lib.Params
 Objective = Callable[[jax.Array], jax.Array]
@@ -69,7 +70,7 @@ def optimise(simulation: Driver, objective: Objective, params: Params, *,
     history.append(record)
     if log is not None:
       log(record)
-    if not all(np.all(np.isfinite(np.asarray(g))) for g in grad.values()):
+    if not rollouts.all_finite(grad):
       raise FloatingPointError(f"iteration {i}: the gradient at {params} is "
                                "not finite")
     updates, state = opt.update(grad, state, params)

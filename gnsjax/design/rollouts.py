@@ -56,7 +56,8 @@ Objective = Callable[[jax.Array], jax.Array]
 # -------------------------------------------------- non-finite gradients ---
 
 
-def _finite(tree) -> bool:
+def all_finite(tree) -> bool:
+  """Whether every leaf of ``tree`` (e.g. a gradient) is finite (host)."""
   return all(np.all(np.isfinite(np.asarray(g))) for g in jax.tree.leaves(tree))
 
 
@@ -75,7 +76,7 @@ def _first_bad(finite_at: Callable[[int], bool], n: int) -> int:
 
 def _gradient_error(scene: mpm.Scene, objective: Objective, grad: Params,
                     frame: int) -> FloatingPointError:
-  keys = [k for k, g in grad.items() if not np.all(np.isfinite(np.asarray(g)))]
+  keys = [k for k, g in grad.items() if not all_finite(g)]
   name = getattr(objective, "__name__", None) or repr(objective)
   return FloatingPointError(
       f"scene {scene.name}: the gradient of {name} w.r.t. {', '.join(keys)} "
@@ -338,7 +339,7 @@ class GNSDriver:
     """
     value, grad, positions = self._run(_gns_value_and_grad, params,
                                        objective)
-    if not _finite(grad):
+    if not all_finite(grad):
       raise self._gradient_error(objective, params, grad)
     return float(value), grad, np.asarray(positions)
 
@@ -351,7 +352,7 @@ class GNSDriver:
       sim = self.sim.replace(num_frames=(c - 1 + steps) * k + 1)
       driver = GNSDriver(sim, self.model_params, self.nbrs)
       _, g, _ = driver._run(_gns_value_and_grad, params, objective)
-      return _finite(g)
+      return all_finite(g)
 
     steps = _first_bad(finite_at, self.sim.n_steps)
     return _gradient_error(self.placement.scene, objective, grad,
@@ -498,7 +499,7 @@ class MPMDriver:
     (value, (x, finite, max_speed)), grad = _mpm_value_and_grad(
         self.sim, params, objective)
     self._check(params, finite, max_speed)
-    if not _finite(grad):
+    if not all_finite(grad):
       raise self._gradient_error(objective, params, grad)
     return float(value), grad, np.asarray(x)
 
@@ -507,7 +508,7 @@ class MPMDriver:
     (rollouts truncated after k frames, bisected; a compilation each)."""
     def finite_at(frames):
       sim = self.sim.replace(num_frames=frames + 1)
-      return _finite(_mpm_value_and_grad(sim, params, objective)[1])
+      return all_finite(_mpm_value_and_grad(sim, params, objective)[1])
 
     return _gradient_error(self.placement.scene, objective, grad,
                            _first_bad(finite_at, self.sim.num_frames - 1))

@@ -44,13 +44,18 @@ Params = placement_lib.Params
 ESTIMATORS = ("pathwise", "score")
 
 
+def check_num_samples(num_samples: int) -> None:
+  """Raises ValueError unless ``num_samples`` is even and >= 2."""
+  if num_samples < 2 or num_samples % 2:
+    raise ValueError(f"num_samples = {num_samples}; allowed: an even "
+                     "number >= 2 (antithetic pairs)")
+
+
 def perturbations(key: jax.Array, params: Params, num_samples: int
                   ) -> jax.Array:
   """Standard normal directions [num_samples, P] in antithetic pairs (row
   2i + 1 = -row 2i), P the number of scalar parameters."""
-  if num_samples < 2 or num_samples % 2:
-    raise ValueError(f"num_samples = {num_samples}; allowed: an even "
-                     "number >= 2 (antithetic pairs)")
+  check_num_samples(num_samples)
   flat, _ = flatten_util.ravel_pytree(params)
   half = jax.random.normal(key, (num_samples // 2, flat.size), flat.dtype)
   return jnp.stack([half, -half], axis=1).reshape(num_samples, flat.size)
@@ -142,9 +147,7 @@ def mpm_smoothed_value_and_grad(sim: rollouts.MPMRollout, objective,
   _flat_sigma(sigma, params, flatten_util.ravel_pytree(params)[0])
   value, grad, stderr = _mpm_smoothed(sim, params, key, sigma, objective,
                                       num_samples, estimator)
-  finite = np.isfinite(float(value)) and all(
-      np.all(np.isfinite(np.asarray(g))) for g in grad.values())
-  if not finite:
+  if not (np.isfinite(value) and rollouts.all_finite(grad)):
     raise FloatingPointError(
         f"{sim.placement.scene.name}: the smoothed ({estimator}) objective or "
         f"its gradient at {jax.tree.map(np.asarray, params)} is not finite")
@@ -164,7 +167,7 @@ class SmoothedMPMDriver:
                seed: int = 0):
     if estimator not in ESTIMATORS:
       raise ValueError(f"estimator = {estimator!r}; allowed: {ESTIMATORS}")
-    perturbations(jax.random.key(0), {"x": jnp.float32(0)}, num_samples)
+    check_num_samples(num_samples)
     self.driver, self.sigma = driver, sigma
     self.num_samples, self.estimator = num_samples, estimator
     self._key, self._calls = jax.random.key(seed), 0
