@@ -182,8 +182,7 @@ def check_target(spec: DatasetSpec, out_dir: str) -> None:
     path = os.path.join(out_dir, name)
     if not os.path.exists(path):
       continue
-    with open(path) as f:
-      stored = json.load(f)
+    stored = mpm_io.read_json(path)
     stored = stored.get("spec", {}) if name == "metadata.json" else stored
     differences = _differences(stored, spec)
     if differences:
@@ -295,13 +294,11 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
   check_target(spec, out_dir)
   meta_path = os.path.join(out_dir, "metadata.json")
   if os.path.exists(meta_path):
-    with open(meta_path) as f:
-      return json.load(f)
+    return mpm_io.read_json(meta_path)
   os.makedirs(out_dir, exist_ok=True)
   with _exclusive(out_dir):
     if os.path.exists(meta_path):  # finished before we took the lock
-      with open(meta_path) as f:
-        return json.load(f)
+      return mpm_io.read_json(meta_path)
     return _generate(spec, out_dir, workers, progress, compilation_cache)
 
 
@@ -390,8 +387,7 @@ def load_spec(out_dir: str) -> DatasetSpec:
     raise mpm_io.FormatError(f"{path}: missing; the dataset is incomplete "
                              "(rerun the generation to finish it)")
   try:
-    with open(path) as f:
-      return DatasetSpec(**json.load(f)["spec"])
+    return DatasetSpec(**mpm_io.read_json(path)["spec"])
   except (json.JSONDecodeError, KeyError, TypeError) as e:
     raise mpm_io.FormatError(f"{path}: not a dataset metadata file ({e})"
                              ) from e

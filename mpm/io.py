@@ -174,6 +174,12 @@ def write_json(path: str, obj) -> None:
   write_text(path, json.dumps(obj, indent=2))
 
 
+def read_json(path: str):
+  """The JSON value stored in ``path`` (``write_json``'s inverse)."""
+  with open(path) as f:
+    return json.load(f)
+
+
 def write_header(f: h5py.File, scene: scene_lib.Scene, sequence_length: int,
                  stats: dict, connectivity_radius: float) -> None:
   """Writes the root attributes of a file."""
