@@ -63,6 +63,7 @@ def main(argv):
   xs = _check_inputs()
   runtime.enable_compilation_cache()
   # pylint: disable=g-import-not-at-top
+  from experiments import evaluation
   from gnsjax.design import gradient_check
   from gnsjax.design import objectives
   objective = objectives.make(_OBJECTIVE.value, x_protect=_X_PROTECT.value,
@@ -71,10 +72,7 @@ def main(argv):
   rows = gradient_check.check(scene, objective, xs, sigma=_SIGMA.value,
                               num_samples=_SAMPLES.value)
   os.makedirs(_OUT.value, exist_ok=True)
-  with open(os.path.join(_OUT.value, "rows.csv"), "w") as f:
-    f.write(",".join(rows[0]) + "\n")
-    f.writelines(",".join(f"{v:.6g}" for v in r.values()) + "\n"
-                 for r in rows)
+  evaluation.write_csv(os.path.join(_OUT.value, "rows.csv"), rows)
   mpm_io.write_json(os.path.join(_OUT.value, "summary.json"), {
       "scene": scene.to_dict(), "objective": _OBJECTIVE.value,
       "x_protect": _X_PROTECT.value, "target_x": _TARGET_X.value,
