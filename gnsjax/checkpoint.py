@@ -2,7 +2,8 @@
 
 Each checkpoint holds the train state (step, parameters, optimiser state,
 random key), the resolved config and the normalisation statistics, so any one
-of them restores on its own. Saved every ``every_steps`` steps and at named
+of them restores on its own, and the neighbour lists' sizes, so a resumed
+run computes exactly what an uninterrupted one does. Saved every ``every_steps`` steps and at named
 steps (the paper's V1-V4 at 0.5M, 1M, 1.5M and 2M), keeping the latest
 ``keep`` plus every named one. Writes are atomic (orbax writes to a temporary
 directory and renames it).
@@ -32,12 +33,19 @@ def manager(workdir: str, every_steps: int, named_steps: Sequence[int] = (),
 
 
 def save(mngr: ocp.CheckpointManager, step: int, state: Any, config: dict,
-         stats: dict, force: bool = False) -> bool:
-  """Saves if the policy says so (or ``force``); returns whether it did."""
-  return mngr.save(step, args=ocp.args.Composite(
-      state=ocp.args.StandardSave(state),
-      config=ocp.args.JsonSave(config),
-      stats=ocp.args.JsonSave(stats)), force=force)
+         stats: dict, graph_capacities: dict | None = None,
+         force: bool = False) -> bool:
+  """Saves if the policy says so (or ``force``); returns whether it did.
+
+  ``graph_capacities`` (``Trainer.graph_capacities``) are the neighbour
+  lists' sizes, which a resumed run needs to compute what this one would.
+  """
+  items = dict(state=ocp.args.StandardSave(state),
+               config=ocp.args.JsonSave(config),
+               stats=ocp.args.JsonSave(stats))
+  if graph_capacities is not None:
+    items["graph_capacities"] = ocp.args.JsonSave(graph_capacities)
+  return mngr.save(step, args=ocp.args.Composite(**items), force=force)
 
 
 def restore(mngr: ocp.CheckpointManager, abstract_state: Any,
@@ -63,6 +71,16 @@ def read_stats(mngr: ocp.CheckpointManager, step: int) -> dict:
   """The normalisation statistics stored with a checkpoint."""
   return mngr.restore(step, args=ocp.args.Composite(
       stats=ocp.args.JsonRestore()))["stats"]
+
+
+def read_graph_capacities(mngr: ocp.CheckpointManager, step: int) -> dict:
+  """The neighbour-list sizes stored with a checkpoint; {} for checkpoints
+  written before they were stored."""
+  if not os.path.isdir(os.path.join(mngr.directory, str(step),
+                                    "graph_capacities")):
+    return {}
+  return mngr.restore(step, args=ocp.args.Composite(
+      graph_capacities=ocp.args.JsonRestore()))["graph_capacities"]
 
 
 def restore_params(mngr: ocp.CheckpointManager, abstract_params: Any,

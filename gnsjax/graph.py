@@ -316,6 +316,12 @@ def _with_capacity(nbrs: partition.NeighborList, capacity: int,
                              cell_list_capacity=cell_capacity)
 
 
+def capacities(nbrs: partition.NeighborList) -> tuple[int, int | None]:
+  """(edge capacity E, cell capacity or None): a list's static sizes, the
+  shapes every jitted function taking it is compiled for."""
+  return int(nbrs.idx.shape[-1]), nbrs.cell_list_capacity
+
+
 def _max_cell_capacity(lists) -> int | None:
   capacities = [l.cell_list_capacity for l in lists]
   if any(c is None for c in capacities):
@@ -323,13 +329,19 @@ def _max_cell_capacity(lists) -> int | None:
   return max(capacities)
 
 
-def allocate_batch(spec: GraphSpec,
-                   positions: jax.Array) -> partition.NeighborList:
+def allocate_batch(
+    spec: GraphSpec, positions: jax.Array,
+    capacities: tuple[int, int | None] | None = None
+) -> partition.NeighborList:
   """Allocates one list per window, at the largest capacities. Not jittable.
 
   Args:
     spec: the graph's static description.
     positions: [B, N, 2] world positions (m), padding nodes at parking sites.
+    capacities: (edge, cell) capacities to allocate at instead (e.g. a
+      resumed run's, from ``capacities``): the edges are then built exactly
+      as an ``update`` of a list of these sizes builds them, and the list
+      is reallocated larger only if they do not fit.
 
   Returns:
     A list whose array leaves carry a leading batch axis: idx [B, 2, E]
@@ -340,7 +352,20 @@ def allocate_batch(spec: GraphSpec,
   capacity = max(l.max_occupancy for l in lists)
   cell_capacity = _max_cell_capacity(lists)
   lists = [_with_capacity(l, capacity, cell_capacity) for l in lists]
-  return jax.tree.map(lambda *leaves: jnp.stack(leaves), *lists)
+  nbrs = jax.tree.map(lambda *leaves: jnp.stack(leaves), *lists)
+  if capacities is None:
+    return nbrs
+  capacity, cell_capacity = capacities
+  n = nbrs.reference_position.shape[-2]
+  # An empty list of those sizes. jax-md's update keeps the edges of a list
+  # whose particles have not moved, so its reference is moved off: the
+  # update below builds every edge.
+  shell = dataclasses.replace(
+      nbrs, idx=jnp.full(nbrs.idx.shape[:-1] + (capacity,), n,
+                         nbrs.idx.dtype),
+      max_occupancy=capacity, cell_list_capacity=cell_capacity,
+      reference_position=nbrs.reference_position + 1.0)
+  return update_or_reallocate(spec, positions, shell, batched=True)[0]
 
 
 def update_batch(spec: GraphSpec, positions: jax.Array,

@@ -214,6 +214,29 @@ class Trainer:
                           simulator.ModelPredictor(self.model)),
         static_argnames=("spec", "length", "project", "batched"))
     self._pushforward_nbrs = {}
+    self._restored_capacities = {}
+
+  def graph_capacities(self) -> dict:
+    """The neighbour lists' static sizes, {"train"|"pushforward": {N:
+    [edge capacity, cell capacity]}}. They grow with the data a run has
+    seen, and they fix the shapes the train step is compiled for, so a
+    checkpoint keeps them and a resumed run starts from them
+    (``restore_graph_capacities``): its steps then compute exactly what the
+    uninterrupted run's did."""
+    return {name: {str(n): list(graph.capacities(nbrs))
+                   for n, nbrs in lists.items()}
+            for name, lists in (("train", self._nbrs),
+                                ("pushforward", self._pushforward_nbrs))}
+
+  def restore_graph_capacities(self, capacities: dict) -> None:
+    """Lists allocated from now on start at these sizes (at least)."""
+    self._restored_capacities = capacities
+
+  def _allocate(self, kind: str, positions: jax.Array):
+    saved = self._restored_capacities.get(kind, {}).get(
+        str(positions.shape[1]))
+    return graph.allocate_batch(self.problem.spec, positions,
+                                None if saved is None else tuple(saved))
 
   def init_state(self, seed: int) -> TrainState:
     init_key, key = jax.random.split(jax.random.key(seed))
@@ -230,7 +253,7 @@ class Trainer:
     spec = self.problem.spec
     nbrs = self._nbrs.get(n)
     if nbrs is None:
-      nbrs = graph.allocate_batch(spec, positions)
+      nbrs = self._allocate("train", positions)
     nbrs, _ = graph.update_or_reallocate(spec, positions, nbrs, batched=True)
     self._nbrs[n] = nbrs
     return _batched_edges(nbrs, n)
@@ -284,7 +307,7 @@ class Trainer:
     n = inputs.shape[2]
     nbrs = self._pushforward_nbrs.get(n)
     if nbrs is None:
-      nbrs = graph.allocate_batch(spec, window[-1])
+      nbrs = self._allocate("pushforward", window[-1])
     for _ in range(3):
       positions, carried, overflow, nbrs, _ = self._unroll(
           params, window, types, moving, solids, nbrs, self.problem.context,
@@ -397,6 +420,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   state = trainer.init_state(tcfg.seed)
   if stored is not None:
     state, _, _ = checkpoint.restore(mngr, state)
+    trainer.restore_graph_capacities(
+        checkpoint.read_graph_capacities(mngr, int(state.step)))
     state = jax.device_put(state, trainer.replicated)
     logging.info("resumed from step %d", int(state.step))
   mpm_io.write_json(os.path.join(workdir, "config.json"), config_dict)
@@ -478,6 +503,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
       out_of_time = (tcfg.max_wall_time_s and time.perf_counter() - run_start
                      + trained_before >= tcfg.max_wall_time_s)
       checkpoint.save(mngr, done, state, config_dict, problem.to_dict(),
+                      trainer.graph_capacities(),
                       force=done == tcfg.num_steps or bool(out_of_time))
       if out_of_time:
         logging.info("stopping at step %d: max_wall_time_s = %s reached",

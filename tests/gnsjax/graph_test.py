@@ -216,6 +216,32 @@ class GraphTest(absltest.TestCase):
                                                          RADIUS)}
       self.assertEqual(pairs, expected)
 
+  def test_allocation_at_stored_capacities_equals_the_grown_list(self):
+    # A resumed training run re-allocates its lists at the capacities its
+    # checkpoint stored: the list (edge order included, which fixes the
+    # rounding of every sum over edges) must be the one the uninterrupted
+    # run's grown list gives by an update.
+    sparse = np.stack([_window(40 + b) for b in range(2)])
+    dense = sparse.copy()
+    dense[1, :N_REAL] = dense[1, :N_REAL] * 0.3 + 0.1  # more edges
+    grown, reallocated = graph.update_or_reallocate(
+        SPEC, dense, graph.allocate_batch(SPEC, sparse), batched=True)
+    self.assertTrue(reallocated)
+    uninterrupted, _ = graph.update_or_reallocate(SPEC, sparse, grown,
+                                                  batched=True)
+    fresh = graph.allocate_batch(SPEC, sparse)
+    restored = graph.allocate_batch(SPEC, sparse, graph.capacities(grown))
+    self.assertLess(graph.capacities(fresh)[0], graph.capacities(grown)[0])
+    self.assertEqual(graph.capacities(restored), graph.capacities(grown))
+    self.assertEqual(jax.tree.structure(restored),
+                     jax.tree.structure(uninterrupted))
+    jax.tree.map(np.testing.assert_array_equal, restored, uninterrupted)
+    # Sizes too small for these positions: reallocated, no edge dropped.
+    small = graph.allocate_batch(SPEC, dense, graph.capacities(fresh))
+    self.assertFalse(bool(jnp.any(small.did_buffer_overflow)))
+    self.assertEqual(_edge_set(*graph.batch_edges(small, N), 2 * N),
+                     _edge_set(*graph.batch_edges(grown, N), 2 * N))
+
   def test_update_does_not_retrace(self):
     traces = []
 
