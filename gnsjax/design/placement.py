@@ -44,18 +44,18 @@ class Placement:
   def __post_init__(self):
     n = len(self.scene.obstacles)
     if not 0 <= self.index < n:
-      raise ValueError(f"index = {self.index}: the scene has {n} obstacle(s); "
-                       f"allowed: 0..{n - 1} (add the obstacle to design to "
-                       "the scene)")
+      raise scene_lib.InputError(
+          f"index = {self.index}: the scene has {n} obstacle(s); allowed: "
+          f"0..{n - 1} (add the obstacle to design to the scene)")
     unknown = set(self.free) - set(FREE_PARAMETERS)
     if not self.free or unknown or "x" not in self.free:
-      raise ValueError(f"free = {self.free}: allowed: ('x',) or ('x', "
-                       "'size')")
+      raise scene_lib.InputError(
+          f"free = {self.free}: allowed: ('x',) or ('x', 'size')")
     lo, hi = self.x_range
     if not 0 <= lo < hi <= self.scene.domain.width:
-      raise ValueError(f"x_range = {self.x_range}: must lie within the "
-                       f"domain [0, {self.scene.domain.width:g}] m with "
-                       "x_min < x_max")
+      raise scene_lib.InputError(
+          f"x_range = {self.x_range}: must lie within the domain "
+          f"[0, {self.scene.domain.width:g}] m with x_min < x_max")
     self.check(self.initial())
 
   @property
@@ -107,7 +107,7 @@ class Placement:
 
   def scene_at(self, params: Params) -> scene_lib.Scene:
     """The scene with the obstacle at ``params`` (validated: off the ramp,
-    outside the domain or overlapping another obstacle raise ValueError)."""
+    outside the domain or overlapping another obstacle raise InputError)."""
     self.check(params)
     d = self.scene.to_dict()
     o = dict(d["obstacles"][self.index], x=float(params["x"]))
@@ -117,17 +117,19 @@ class Placement:
     return scene_lib.Scene.from_dict(d)
 
   def check(self, params: Params) -> None:
-    """Raises ValueError when ``params`` lie outside the allowed ranges."""
+    """Raises InputError (a ValueError) when ``params`` lie outside the
+    allowed ranges."""
     x = float(params["x"])
     lo, hi = self.x_range
     if not lo <= x <= hi:
-      raise ValueError(f"obstacle x = {x:g} m is outside the allowed range "
-                       f"[{lo:g}, {hi:g}] m")
+      raise scene_lib.InputError(
+          f"obstacle x = {x:g} m is outside the allowed range "
+          f"[{lo:g}, {hi:g}] m")
     if "size" in params:
       r = self.size_range()
       size = np.asarray(params["size"], np.float32)
       if np.any(size < r[:, 0] - 1e-7) or np.any(size > r[:, 1] + 1e-7):
-        raise ValueError(
+        raise scene_lib.InputError(
             f"obstacle size {dict(zip(self.size_keys, size.tolist()))} is "
             f"outside the allowed ranges "
             f"{dict(zip(self.size_keys, r.tolist()))} m")

@@ -5,9 +5,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from gnsjax.design import placement as placement_lib
+from mpm import scene as scene_lib
 from tests.gnsjax.design.fixtures import scene
 
 Placement = placement_lib.Placement
+# A ValueError the entry points print in one line.
+InputError = scene_lib.InputError
 
 
 class PlacementTest(absltest.TestCase):
@@ -24,19 +27,19 @@ class PlacementTest(absltest.TestCase):
 
   def test_x_outside_the_range_is_refused(self):
     p = Placement(scene())
-    with self.assertRaisesRegex(ValueError, r"x = 1.4.*\[0.5, 1.3\]"):
+    with self.assertRaisesRegex(InputError, r"x = 1.4.*\[0.5, 1.3\]"):
       p.check({"x": jnp.float32(1.4)})
-    with self.assertRaisesRegex(ValueError, r"x = 0.45.*\[0.5, 1.3\]"):
+    with self.assertRaisesRegex(InputError, r"x = 0.45.*\[0.5, 1.3\]"):
       Placement(scene(obstacles=[{"shape": "semicircle", "x": 0.45,
                                   "radius": 0.03}]))
 
   def test_obstacle_off_the_ramp_or_missing_is_refused(self):
-    with self.assertRaisesRegex(ValueError, "obstacle"):
+    with self.assertRaisesRegex(InputError, "obstacle"):
       placement_lib.with_obstacle(scene(obstacles=[]), "semicircle", 1.8,
                                   radius=0.03)
-    with self.assertRaisesRegex(ValueError, "index = 0.*add the obstacle"):
+    with self.assertRaisesRegex(InputError, "index = 0.*add the obstacle"):
       Placement(scene(obstacles=[]))
-    with self.assertRaisesRegex(ValueError, "free"):
+    with self.assertRaisesRegex(InputError, "free"):
       Placement(scene(), free=("size",))
 
   def test_scene_at_moves_the_obstacle(self):
