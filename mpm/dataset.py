@@ -152,12 +152,32 @@ def _simulate_part(item: PlannedScene, parts_dir: str) -> float:
   return result.wall_time_s
 
 
-def _part_ok(path: str) -> bool:
+def _part_done(item: PlannedScene, parts_dir: str) -> bool:
+  """Whether ``item``'s part is written, whole (else it is redone).
+
+  Raises:
+    InputError: the part holds another scene than the planned one: made
+      with another config (or by a version that kept no spec.json), so
+      resuming would mix two datasets.
+  """
+  path = os.path.join(parts_dir, item.part_name)
   try:
     with mpm_io.open_file(path) as f:
-      return len(f.keys()) == 1
+      if len(f.keys()) != 1:
+        return False
+      stored = next(iter(f.values())).attrs.get("scene")
   except mpm_io.FormatError:
     return False
+  if stored is None:
+    return False
+  if scene_lib.Scene.from_json(stored) != item.scene:
+    raise scene_lib.InputError(
+        f"{path} holds another scene than this config plans for "
+        f"{item.part_name} ({scene_lib.Scene.from_json(stored).name!r} "
+        "simulated with other values): the parts in "
+        f"{parts_dir} were made with another config; use another "
+        "directory or the same config")
+  return True
 
 
 _SPEC_FILE = "spec.json"
@@ -305,13 +325,14 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
 def _generate(spec, out_dir, workers, progress, compilation_cache) -> dict:
   parts_dir = os.path.join(out_dir, "parts")
   os.makedirs(parts_dir, exist_ok=True)
+  _remove_stale_temps(parts_dir)
+  items = plan(spec)
+  # Checked before spec.json is written: parts of another config (say, from
+  # a version that kept no spec.json) are refused, not adopted.
+  todo = [it for it in items if not _part_done(it, parts_dir)]
   spec_path = os.path.join(parts_dir, _SPEC_FILE)
   if not os.path.exists(spec_path):
     mpm_io.write_json(spec_path, dataclasses.asdict(spec))
-  _remove_stale_temps(parts_dir)
-  items = plan(spec)
-  todo = [it for it in items
-          if not _part_ok(os.path.join(parts_dir, it.part_name))]
   done = len(items) - len(todo)
   if progress is not None:
     progress(done, len(items), 0.0)

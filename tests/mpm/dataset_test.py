@@ -225,6 +225,29 @@ class OtherSpecTest(absltest.TestCase):
       dataset.generate(SPEC, self.dir, workers=1)
     dataset.check_target(other, self.dir)  # the same spec resumes
 
+  def test_parts_of_another_config_without_spec_file_are_refused(self):
+    # Parts from a version that kept no spec.json: each part's stored scene
+    # is compared with the scene this config plans for it.
+    parts = os.path.join(self.dir, "parts")
+    os.makedirs(parts)
+    mine = dataset.plan(SPEC)[0]
+    theirs = dataset.plan(dataclasses.replace(SPEC, num_frames=20))[0]
+    self.assertEqual(theirs.part_name, mine.part_name)
+
+    def write_part(item):
+      positions = np.zeros((3, 4, 2), np.float32)  # shape-valid stand-in
+      mpm_io.write_trajectories(
+          os.path.join(parts, item.part_name),
+          [mpm_io.Trajectory(positions, np.zeros((0, 2)), np.zeros(0, int),
+                             item.scene, item.seed)])
+
+    write_part(theirs)
+    with self.assertRaisesRegex(
+        dataset.scene_lib.InputError,
+        f"{mine.part_name} .*another config; use another directory"):
+      dataset.generate(SPEC, self.dir, workers=1)
+    self.assertEqual(sorted(os.listdir(parts)), [mine.part_name])  # no spec
+
   def test_other_dataset_is_refused(self):
     mpm_io.write_json(os.path.join(self.dir, "metadata.json"),
                       {"spec": dataclasses.asdict(SPEC), "num_train": 3})
