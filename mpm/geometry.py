@@ -479,7 +479,7 @@ def granular_particles(scene: scene_lib.Scene) -> np.ndarray:
   free = grid[phi >= g.spacing / 2]
   wanted = g.num_particles if g.num_particles is not None else max(len(free), 1)
   if len(free) < wanted:
-    raise ValueError(
+    raise scene_lib.InputError(
         f"granular.box = {list(g.box)}: only {len(free)} lattice points at "
         f"spacing {g.spacing:g} m lie above the ramp and outside obstacles, but "
         f"{wanted} particles are needed; allowed: a box with free space for "

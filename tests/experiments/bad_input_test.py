@@ -106,6 +106,9 @@ ROWS = (
     # Item 7: one range for --x0, below or above it.
     ("inverse_design_x0_low", "experiments.inverse_design",
      ["--out={d}/out", "--x0=0.3"], "--x0=0.3; allowed: [0.5, 1.3] m"),
+    ("stability_unknown_case", "experiments.stability",
+     ["--out={d}/out", "--only=nope"],
+     "--only: unknown case(s) ['nope']; allowed: ['mpm_base'"),
     ("inverse_design_x0_high", "experiments.inverse_design",
      ["--out={d}/out", "--x0=1.6"], "--x0=1.6; allowed: [0.5, 1.3] m"),
     ("inverse_design_smoothed_gns", "experiments.inverse_design",
