@@ -61,6 +61,7 @@ class Check:
   max_inside: float
   max_outside: float
   max_speed: float
+  final_speed: float     # mean sand speed over the last stored interval
 
   @property
   def ok(self) -> bool:
@@ -112,10 +113,12 @@ def check_frames(positions: np.ndarray, frames: np.ndarray,
     if frame is not None:
       break
   finite_speed = speed[np.isfinite(speed)]
+  final_speed = (float(np.mean(np.linalg.norm(x[-1] - x[-2], axis=-1))
+                       / dt[-1, 0]) if len(x) > 1 else 0.0)
   return Check(None if frame is None else int(frame), reason,
                float(np.max(inside, initial=0.0)),
                float(np.max(outside, initial=0.0)),
-               float(np.max(finite_speed, initial=0.0)))
+               float(np.max(finite_speed, initial=0.0)), final_speed)
 
 
 # ------------------------------------------------------------------ cases ---
@@ -177,6 +180,15 @@ def mpm_cases() -> list[Case]:
            lambda: _scene(material={"youngs_modulus": 1e4})),
       Case("mpm_stiffness_1e7", "mpm", "Young's modulus 1e7 Pa",
            lambda: _scene(material={"youngs_modulus": 1e7})),
+      # Beyond the ranges asked for, to find where it breaks.
+      Case("mpm_particles_10", "mpm", "10 particles",
+           lambda: _scene(granular={"num_particles": 10})),
+      Case("mpm_friction_5", "mpm", "friction angle 5 deg",
+           lambda: _scene(material={"friction_angle_deg": 5.0})),
+      Case("mpm_friction_70", "mpm", "friction angle 70 deg",
+           lambda: _scene(material={"friction_angle_deg": 70.0})),
+      Case("mpm_stiffness_1e3", "mpm", "Young's modulus 1e3 Pa",
+           lambda: _scene(material={"youngs_modulus": 1e3})),
       Case("mpm_straight_incline", "mpm", "a straight 15 deg incline",
            lambda: _scene(ramp=INCLINE)),
       Case("mpm_three_obstacles", "mpm", "three obstacles",
@@ -238,6 +250,8 @@ def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
       "max_outside_domain": "" if check is None else
                             round(check.max_outside, 4),
       "max_speed_m_s": "" if check is None else round(check.max_speed, 3),
+      "final_speed_m_s": "" if check is None else
+                         round(check.final_speed, 4),
       "wall_time_s": round(wall, 1),
   }
 
@@ -315,7 +329,8 @@ def picture(outcome: Outcome, path: str) -> str | None:
 def table(rows: Sequence[dict]) -> str:
   lines = ["| case | what it pushes | particles | frames | status | first "
            "bad frame: what | max inside solids | max outside | max speed "
-           "(m/s) | wall (s) |", "|---" * 10 + "|"]
+           "(m/s) | mean speed at the end (m/s) | wall (s) |",
+           "|---" * 11 + "|"]
   for r in rows:
     bad = (f"{r['break_frame']}: {r['what']}" if r["break_frame"] != "" else
            r["what"])
@@ -325,7 +340,8 @@ def table(rows: Sequence[dict]) -> str:
                if r["max_outside_domain"] != "" else "")
     lines.append(f"| {r['case']} | {r['extreme']} | {r['particles']} | "
                  f"{r['frames']} | {r['status']} | {bad} | {inside} | "
-                 f"{outside} | {r['max_speed_m_s']} | {r['wall_time_s']} |")
+                 f"{outside} | {r['max_speed_m_s']} | "
+                 f"{r['final_speed_m_s']} | {r['wall_time_s']} |")
   return "\n".join(lines) + "\n"
 
 
