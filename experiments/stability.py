@@ -235,7 +235,8 @@ def gns_cases(spacing: float) -> list[Case]:
 
 
 def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
-         frames: int, wall: float, error: str | None = None) -> dict:
+         frames: int, wall: float, error: str | None = None,
+         error_frame: int | None = None) -> dict:
   n = 0 if scene is None else len(mpm.granular_particles(scene))
   status = ("refused" if error and scene is None else
             "broken" if error or not check.ok else "ok")
@@ -243,7 +244,8 @@ def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
       "case": case.name, "simulator": case.simulator,
       "extreme": case.extreme, "particles": n, "frames": frames,
       "status": status,
-      "break_frame": "" if check is None or check.ok else check.frame,
+      "break_frame": (check.frame if check is not None and not check.ok
+                      else "" if error_frame is None else error_frame),
       "what": error or (check.reason if check and not check.ok else ""),
       "max_inside_solids": "" if check is None else
                            round(check.max_inside, 4),
@@ -268,7 +270,7 @@ class Outcome:
 
 def run_mpm(case: Case) -> Outcome:
   try:
-    scene = case.scene()
+    scene = dataclasses.replace(case.scene(), name=case.name)
   except mpm.InputError as e:
     return Outcome(_row(case, None, None, 0, 0.0, f"scene refused: {e}"))
   start = time.perf_counter()
@@ -278,7 +280,7 @@ def run_mpm(case: Case) -> Outcome:
     return Outcome(_row(case, None, None, 0, 0.0, f"scene refused: {e}"))
   except mpm.SimulationError as e:
     return Outcome(_row(case, scene, None, e.frame,
-                        time.perf_counter() - start, str(e)), scene)
+                        time.perf_counter() - start, str(e), e.frame), scene)
   wall = time.perf_counter() - start
   positions = np.asarray(result.positions)
   frames = np.arange(len(positions))
@@ -293,7 +295,7 @@ def run_gns(case: Case, run: train.Run) -> Outcome:
   problem = run.problem
   c, k = problem.input_frames, problem.frame_stride
   try:
-    scene = case.scene()
+    scene = dataclasses.replace(case.scene(), name=case.name)
   except mpm.InputError as e:
     return Outcome(_row(case, None, None, 0, 0.0, f"scene refused: {e}"))
   window_end = case.start_frame + (c - 1) * k

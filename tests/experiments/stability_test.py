@@ -112,8 +112,9 @@ class CasesTest(absltest.TestCase):
                                              lambda: SCENE)).row
     finally:
       mpm.simulate = real
-    self.assertEqual((row["status"], row["frames"]), ("broken", 3))
-    self.assertIn("scene 'checks', frame 3: positions are not finite",
+    self.assertEqual((row["status"], row["frames"], row["break_frame"]),
+                     ("broken", 3, 3))
+    self.assertIn("scene 'tiny', frame 3: positions are not finite",
                   row["what"])
 
     def off_the_ramp():
