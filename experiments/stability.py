@@ -167,33 +167,28 @@ def mpm_cases() -> list[Case]:
   cases = [
       Case("mpm_base", "mpm", "the paper scene (1000 particles, 5 mm)",
            _scene),
-      Case("mpm_particles_100", "mpm", "100 particles",
-           lambda: _scene(granular={"num_particles": 100})),
       Case("mpm_particles_20000", "mpm", "20,000 particles (2 mm)",
            lambda: _scene(granular={"num_particles": 20000,
                                     "spacing": 0.002})),
-      Case("mpm_friction_20", "mpm", "friction angle 20 deg",
-           lambda: _scene(material={"friction_angle_deg": 20.0})),
-      Case("mpm_friction_50", "mpm", "friction angle 50 deg",
-           lambda: _scene(material={"friction_angle_deg": 50.0})),
-      Case("mpm_stiffness_1e4", "mpm", "Young's modulus 1e4 Pa",
-           lambda: _scene(material={"youngs_modulus": 1e4})),
-      Case("mpm_stiffness_1e7", "mpm", "Young's modulus 1e7 Pa",
-           lambda: _scene(material={"youngs_modulus": 1e7})),
-      # Beyond the ranges asked for, to find where it breaks.
-      Case("mpm_particles_10", "mpm", "10 particles",
-           lambda: _scene(granular={"num_particles": 10})),
-      Case("mpm_friction_5", "mpm", "friction angle 5 deg",
-           lambda: _scene(material={"friction_angle_deg": 5.0})),
-      Case("mpm_friction_70", "mpm", "friction angle 70 deg",
-           lambda: _scene(material={"friction_angle_deg": 70.0})),
-      Case("mpm_stiffness_1e3", "mpm", "Young's modulus 1e3 Pa",
-           lambda: _scene(material={"youngs_modulus": 1e3})),
       Case("mpm_straight_incline", "mpm", "a straight 15 deg incline",
            lambda: _scene(ramp=INCLINE)),
       Case("mpm_three_obstacles", "mpm", "three obstacles",
            lambda: _scene(obstacles=THREE)),
   ]
+  # The asked ranges' ends, and beyond them (10 particles, 5 and 70 deg,
+  # 1e3 Pa) to find where the MPM breaks.
+  for n in (100, 10):
+    cases.append(Case(f"mpm_particles_{n}", "mpm", f"{n} particles",
+                      lambda n=n: _scene(granular={"num_particles": n})))
+  for angle in (20, 50, 5, 70):
+    cases.append(Case(
+        f"mpm_friction_{angle}", "mpm", f"friction angle {angle} deg",
+        lambda a=angle: _scene(material={"friction_angle_deg": float(a)})))
+  for modulus in (1e4, 1e7, 1e3):
+    cases.append(Case(
+        f"mpm_stiffness_{modulus:.0e}".replace("+0", ""), "mpm",
+        f"Young's modulus {modulus:.0e} Pa".replace("+0", ""),
+        lambda e=modulus: _scene(material={"youngs_modulus": e})))
   for shape in mpm.sampler.SIZE_RANGES:
     for end in ("min", "max"):
       for x in mpm.sampler.OBSTACLE_X_RANGE:
