@@ -3,25 +3,22 @@
   python -m experiments.convergence --out=DIR [--aspect_ratios=0.5,1,2,4] \
       [--spacings=0.005,0.0025,0.00125] [--cfl=0.4]
 
-A column of sand (height h0, width h0 / a for aspect ratio a) against a
-frictionless wall collapses on a flat floor (friction 0.7, friction angle 45
-deg). The normalised runout (L - L0) / L0 is measured at each particle
-spacing (grid spacing twice it), from the furthest particle and from the
-99.5% quantile of x (less sensitive to single particles). Richardson
-extrapolation over the three finest spacings estimates the converged value
-when the changes shrink. Writes ``convergence.csv`` and ``convergence.md``.
+The runout of ``experiments.column_collapse`` at each particle spacing (grid
+spacing twice it); Richardson extrapolation over the three finest spacings
+estimates the converged value when the changes shrink. Writes
+``convergence.csv`` and ``convergence.md``.
 """
 
 import math
 import os
 import time
-from typing import Sequence
 
 from absl import flags
 import numpy as np
 import tqdm
 
 import mpm
+from experiments import column_collapse
 from experiments import evaluation
 from experiments import runtime
 from mpm import io as mpm_io
@@ -34,48 +31,6 @@ _SPACINGS = flags.DEFINE_list("spacings", ["0.005", "0.0025", "0.00125"],
 _CFL = flags.DEFINE_float("cfl", 0.4, "CFL number of the solver.")
 _HEIGHT = flags.DEFINE_float("height", 0.1, "Column height h0 (m).")
 _TIME = flags.DEFINE_float("time", 0.8, "Simulated time (s).")
-
-FLOOR = 0.02            # m, the floor's height in the domain
-FLOOR_FRICTION = 0.7
-FRICTION_ANGLE = 45.0   # deg
-
-
-def column_scene(aspect: float, spacing: float, height: float = 0.1,
-                 cfl: float = 0.4, duration: float = 0.8) -> mpm.Scene:
-  """A column of ``height`` (m) and width height / aspect against the left
-  wall, on a flat floor with room to run out; grid spacing 2 x spacing."""
-  width0 = height / aspect
-  width = width0 + max(6.0 * height, 0.3)
-  return mpm.Scene.from_dict({
-      "name": f"column_a{aspect:g}_s{spacing:g}",
-      "domain": {"width": width, "height": height + 0.06},
-      "ramp": {"kind": "polyline", "points": [[0.0, FLOOR], [width, FLOOR]]},
-      "granular": {"box": [0.0, FLOOR, width0, FLOOR + height],
-                   "spacing": spacing, "num_particles": None},
-      "material": {"friction_angle_deg": FRICTION_ANGLE},
-      "boundary_friction": FLOOR_FRICTION, "wall_friction": 0.0,
-      "solver": {"dx": 2 * spacing, "cfl": cfl},
-      "num_frames": int(round(duration / 0.0025))})
-
-
-def runouts(final_x: np.ndarray, width0: float) -> tuple[float, float]:
-  """Normalised runouts (L - L0) / L0 of the furthest particle and of the
-  99.5% quantile of the final x [N] (m)."""
-  return ((float(np.max(final_x)) - width0) / width0,
-          (float(np.quantile(final_x, 0.995)) - width0) / width0)
-
-
-def richardson(values: Sequence[float]) -> tuple[float, float]:
-  """(extrapolated value, observed order) from values at spacings h, h/2,
-  h/4 (coarse to fine); NaN when the changes do not shrink."""
-  a, b, c = values[-3:]
-  d1, d2 = b - a, c - b
-  if d1 == 0 or d2 / d1 <= 0 or abs(d2) >= abs(d1):
-    return float("nan"), float("nan")
-  ratio = d1 / d2
-  order = math.log2(ratio)
-  return c + d2 / (ratio - 1), order
-
 
 def main(argv):
   del argv
@@ -93,13 +48,14 @@ def main(argv):
   rows = []
   for aspect in aspects:
     for spacing in tqdm.tqdm(spacings, desc=f"a = {aspect:g}", unit="run"):
-      scene = column_scene(aspect, spacing, _HEIGHT.value, _CFL.value,
-                           _TIME.value)
+      scene = column_collapse.column_scene(aspect, spacing, _HEIGHT.value,
+                                           _CFL.value, _TIME.value)
       start = time.perf_counter()
       result = mpm.simulate(scene)
       wall = time.perf_counter() - start
       x = np.asarray(result.positions)
-      front, q995 = runouts(x[-1, :, 0], _HEIGHT.value / aspect)
+      front, q995 = column_collapse.runouts(x[-1, :, 0],
+                                            _HEIGHT.value / aspect)
       rows.append({"aspect_ratio": aspect, "spacing_m": spacing,
                    "dx_m": scene.dx, "particles": x.shape[1],
                    "runout_front": round(front, 4),
@@ -118,7 +74,7 @@ def main(argv):
     mine = [r for r in rows if r["aspect_ratio"] == aspect]
     if len(mine) >= 3:
       for key in ("runout_front", "runout_q995"):
-        value, order = richardson([r[key] for r in mine])
+        value, order = column_collapse.richardson([r[key] for r in mine])
         lines.append(f"- a = {aspect:g}, {key}: Richardson "
                      + (f"{value:.3f} (order {order:.2f})"
                         if math.isfinite(value) else
