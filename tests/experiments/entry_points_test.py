@@ -1,7 +1,9 @@
 """Smoke tests: each entry point runs as a user would run it (tiny inputs)."""
 
+import glob
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -32,6 +34,30 @@ def run(*args):
     raise AssertionError(f"{args} failed ({proc.returncode}):\n"
                          f"{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}")
   return proc.stdout
+
+
+class LayoutTest(absltest.TestCase):
+
+  def test_tests_import_no_entry_point_that_defines_flags(self):
+    # absl flags are process-global: two imported entry points that both
+    # define --out fail to load in one pytest worker. Tests import the
+    # library modules beside them (evaluation, extremes, ...), the benchmark
+    # driver being the one entry point imported (its flags are its API).
+    allowed = {"runtime", "benchmarks/__main__"}
+    defines = {os.path.relpath(p, os.path.join(ROOT, "experiments"))[:-3]
+               for p in glob.glob(os.path.join(ROOT, "experiments", "**",
+                                               "*.py"), recursive=True)
+               if "flags.DEFINE_" in open(p).read()}
+    pattern = re.compile(r"^from experiments(\.[\w.]+)? import (\w+)", re.M)
+    offenders = []
+    for path in glob.glob(os.path.join(ROOT, "tests", "**", "*.py"),
+                          recursive=True):
+      for package, name in pattern.findall(open(path).read()):
+        module = (package.lstrip(".").replace(".", "/") + "/" + name
+                  ).lstrip("/")
+        if module in defines - allowed:
+          offenders.append(f"{os.path.relpath(path, ROOT)}: {module}")
+    self.assertEqual(offenders, [])
 
 
 class EntryPointsTest(absltest.TestCase):
