@@ -33,10 +33,9 @@ def main(argv):
   runtime.writable("out", _OUT.value)
   cases = extremes.mpm_cases()
   run = None
-  if _WORKDIR.value:
-    runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
   known = [c.name for c in cases]
   if _WORKDIR.value:
+    runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
     known += [c.name for c in extremes.gns_cases(0.01)]
   unknown = sorted(set(_ONLY.value or ()) - set(known))
   if unknown:

@@ -3,8 +3,9 @@
 Each checkpoint holds the train state (step, parameters, optimiser state,
 random key), the resolved config and the normalisation statistics, so any one
 of them restores on its own, and the neighbour lists' sizes, so a resumed
-run computes exactly what an uninterrupted one does. Saved every ``every_steps`` steps and at named
-steps (the paper's V1-V4 at 0.5M, 1M, 1.5M and 2M), keeping the latest
+run computes exactly what an uninterrupted one does. Saved every
+``every_steps`` steps and at named steps (the paper's V1-V4 at 0.5M, 1M,
+1.5M and 2M), keeping the latest
 ``keep`` plus every named one. Writes are atomic (orbax writes to a temporary
 directory and renames it).
 """

@@ -170,10 +170,11 @@ def _part_done(item: PlannedScene, parts_dir: str) -> bool:
     return False
   if stored is None:
     return False
-  if scene_lib.Scene.from_json(stored) != item.scene:
+  stored = scene_lib.Scene.from_json(stored)
+  if stored != item.scene:
     raise scene_lib.InputError(
         f"{path} holds another scene than this config plans for "
-        f"{item.part_name} ({scene_lib.Scene.from_json(stored).name!r} "
+        f"{item.part_name} ({stored.name!r} "
         "simulated with other values): the parts in "
         f"{parts_dir} were made with another config; use another "
         "directory or the same config")
