@@ -257,3 +257,34 @@ def flow_checks(results: Sequence[dict], frame_dt: float, path: str):
       ax.set_yscale("log")
   axes.flat[0].legend(fontsize=7)
   _save(fig, path)
+
+
+def pareto(summary: Sequence[dict], path: str, batched: bool = False):
+  """Error against cost (log-log): each configuration's worst front error
+  over the study's scenes (filled) and median (hollow) against its seconds
+  per trajectory, the Pareto front joined. ``summary`` from
+  ``experiments.pareto.summarise``; the reference (zero error) is left out.
+  """
+  key = "seconds_batched" if batched else "seconds"
+  fig, ax = plt.subplots(figsize=(6.5, 4.5))
+  shown = [e for e in summary if e[key] and e["front_error_max"] > 0
+           and np.isfinite(e["front_error_max"])]
+  for e in shown:
+    color = "k" if e["kind"] == "mpm" else "tab:blue"
+    marker = "o" if e["kind"] == "mpm" else "s"
+    ax.plot(e[key], e["front_error_max"], marker, color=color, ms=7)
+    ax.plot(e[key], max(e["front_error_median"], 1e-4), marker, color=color,
+            mfc="none", ms=7)
+    ax.annotate(e["name"], (e[key], e["front_error_max"]), fontsize=7,
+                xytext=(4, 4), textcoords="offset points")
+  front = sorted((e[key], e["front_error_max"]) for e in shown if e["pareto"])
+  if front:
+    ax.plot(*zip(*front), "r--", lw=1, label="Pareto front (worst scene)")
+  ax.plot([], [], "ko", label="MPM (worst / median scene)")
+  ax.plot([], [], "s", color="tab:blue", label="GNS (worst / median scene)")
+  ax.set_xscale("log")
+  ax.set_yscale("log")
+  ax.set_xlabel("seconds per trajectory" + (" (batched)" if batched else ""))
+  ax.set_ylabel("front error (fraction of the runout)")
+  ax.legend(fontsize=7)
+  _save(fig, path)

@@ -12,6 +12,8 @@ Shapes: T steps, N sand particles. Positions in metres.
   a tolerance inside the ramp or an obstacle, and outside the domain, per
   step: a flow that leaks through a solid shows here even when its MSE is
   small.
+- ``mass_past``: the fraction of the sand past fixed lines across the ramp
+  per step, comparable between simulations of different particle counts.
 - ``constant_velocity``: the baseline every learned model must beat.
 """
 
@@ -70,6 +72,13 @@ def deposit_error(pred: np.ndarray, true: np.ndarray,
   a = np.where(np.isnan(a), floor, a)[either]
   b = np.where(np.isnan(b), floor, b)[either]
   return float(np.sqrt(np.mean((a - b)**2)))
+
+
+def mass_past(positions: np.ndarray, lines: np.ndarray) -> np.ndarray:
+  """Fraction [..., L] of the sand past each line x = ``lines`` [L] (m),
+  i.e. with a smaller x (the sand flows toward x = 0), of [..., N, 2]."""
+  x = np.asarray(positions)[..., 0]
+  return np.mean(x[..., None, :] < np.asarray(lines)[:, None], -1)
 
 
 @jax.jit

@@ -1,0 +1,357 @@
+"""The speed/accuracy study of ``python -m experiments.tradeoff``.
+
+Every configuration (the MPM at several particle spacings, learned
+simulators) runs the same held-out scenes, and is scored against the MPM at
+the finest spacing (the reference) with metrics that do not need equal
+particle counts (``score``). Costs are wall times per trajectory on this
+machine, in this run: one scene at a time and, for the MPM, the study's
+scenes as one vmapped batch, compilation apart, synchronised, medians of
+repeats. The table's format is ``gnsjax.tradeoff``'s, which answers "which
+simulator for this tolerance" from it.
+
+Scenes are the paper's test plan (``mpm.dataset.plan``: obstacle count 0-2,
+semicircle, rectangle at x = 0.6 / 1.0 / 1.3, the unseen triangle, 700 /
+1000 / 1500 particles at the paper's spacing) redrawn at each spacing with
+the same sand area (``at_spacing``).
+"""
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import statistics
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+import mpm
+from experiments.benchmarks import timing
+from gnsjax import metrics
+from gnsjax import rollout as rollout_lib
+from gnsjax import run as run_lib
+from gnsjax import tradeoff
+from mpm import dataset
+from mpm import io as mpm_io
+
+# Lines across the ramp (x, m) whose passing sand is counted over time.
+LINES = (1.2, 1.0, 0.8, 0.6, 0.4)
+# Bin width (m) of the deposit profile: twice the coarsest spacing studied,
+# so every resolution fills its bins.
+PROFILE_BIN = 0.04
+# Frames compared: every COMPARE_EVERY-th stored frame (37.5 ms).
+COMPARE_EVERY = 15
+
+
+def study_scenes(count: int, num_frames: int = 600) -> list[mpm.Scene]:
+  """The first ``count`` scenes of the paper's test plan (paper spacing)."""
+  spec = dataset.DatasetSpec(num_train=1, num_test=count,
+                             num_frames=num_frames,
+                             spacing=dataset.PAPER_SPACING)
+  return [p.scene for p in dataset.plan(spec) if p.split == "test"]
+
+
+def at_spacing(scene: mpm.Scene, spacing: float) -> mpm.Scene:
+  """``scene`` at another particle spacing: the same sand area (particle
+  count scaled by (old / new)^2), grid spacing twice the particle spacing."""
+  d = scene.to_dict()
+  old = scene.granular.spacing
+  d["granular"]["spacing"] = spacing
+  d["granular"]["num_particles"] = max(1, int(round(
+      scene.granular.num_particles * (old / spacing)**2)))
+  d["solver"]["dx"] = 2 * spacing
+  return mpm.Scene.from_dict(d)
+
+
+def compare_frames(num_frames: int, predicted: Sequence[Sequence[int]] = ()
+                   ) -> np.ndarray:
+  """Every ``COMPARE_EVERY``-th frame after frame 0 that every learned
+  simulator predicts (``predicted``: each one's frame indices)."""
+  frames = set(range(COMPARE_EVERY, num_frames, COMPARE_EVERY))
+  for p in predicted:
+    frames &= set(int(f) for f in p)
+  if not frames:
+    raise ValueError("compare_frames: no frame common to every simulator")
+  return np.array(sorted(frames))
+
+
+def score(positions: np.ndarray, reference: np.ndarray,
+          reference_start: np.ndarray, scene: mpm.Scene) -> dict[str, float]:
+  """A run's errors against the reference at the same frames.
+
+  Args:
+    positions: [K, N, 2] the run's sand (m) at the compared frames.
+    reference: [K, M, 2] the reference's sand at the same frames.
+    reference_start: [M, 2] the reference's first frame.
+    scene: the run's scene (its solids and spacing for ``inside``).
+
+  Returns:
+    ``front_error`` (fraction of the reference's runout distance, at the
+    last frame), ``deposit_error`` (m), ``past_error`` (fraction of the sand)
+    and ``inside`` (fraction), as in ``gnsjax.tradeoff``.
+  """
+  x = np.asarray(positions, np.float64)
+  reference = np.asarray(reference, np.float64)
+  reference_start = np.asarray(reference_start, np.float64)
+  if not np.all(np.isfinite(x)):
+    return {k: math.nan for k in tradeoff.METRICS}
+  past = metrics.mass_past(x, np.array(LINES))
+  past_ref = metrics.mass_past(reference, np.array(LINES))
+  return {
+      "front_error": metrics.front_error_relative(x[-1], reference[-1],
+                                                  reference_start),
+      "deposit_error": metrics.deposit_error(x[-1], reference[-1],
+                                             PROFILE_BIN),
+      "past_error": float(np.max(np.mean(np.abs(past - past_ref), 0))),
+      "inside": float(np.max(metrics.inside_solids(x, scene))),
+  }
+
+
+@dataclasses.dataclass
+class MPMRuns:
+  """The MPM at one spacing over the study's scenes.
+
+  Attributes:
+    scenes: the scenes at this spacing.
+    results: their ``mpm.SimulationResult``s (one run each).
+    point: the table entry (``gnsjax.tradeoff``'s ``points``).
+  """
+  scenes: list[mpm.Scene]
+  results: list[mpm.SimulationResult]
+  point: dict[str, Any]
+
+
+def mpm_name(spacing: float) -> str:
+  return f"mpm_{spacing:g}"
+
+
+def run_mpm(scenes: Sequence[mpm.Scene], spacing: float, *, repeats: int,
+            timing_scene: int, batched: bool,
+            progress: Callable[[], None] = lambda: None) -> MPMRuns:
+  """Runs every scene at ``spacing`` once, then times.
+
+  Seconds: ``mpm.simulate``'s own clock (compilation excluded, every chunk
+  synchronised), the median of ``repeats`` runs of scene ``timing_scene``
+  (its first run included). Batched: the scenes as one vmapped program
+  (``mpm.simulate_batch``), per trajectory, median of ``repeats``.
+  """
+  scenes = [at_spacing(s, spacing) for s in scenes]
+  results = []
+  for s in scenes:
+    results.append(mpm.simulate(s))
+    progress()
+  samples = [results[timing_scene].wall_time_s]
+  samples += [mpm.simulate(scenes[timing_scene]).wall_time_s
+              for _ in range(repeats - 1)]
+  batch_s, batch_compile = None, None
+  if batched:
+    runs = [mpm.simulate_batch(scenes) for _ in range(repeats)]
+    batch_s = statistics.median(r[0].wall_time_s for r in runs)
+    batch_compile = runs[0][0].compile_time_s
+  point = {
+      "name": mpm_name(spacing), "kind": "mpm",
+      "label": f"MPM, spacing {spacing * 1000:g} mm (dx {2000 * spacing:g} "
+               "mm)",
+      "spacing": spacing, "seconds": statistics.median(samples),
+      "seconds_all": samples, "seconds_batched": batch_s,
+      "compile_s": results[timing_scene].compile_time_s,
+      "compile_batched_s": batch_compile, "training_s": None,
+      "particles": scenes[timing_scene].granular.num_particles,
+      "substeps_per_frame": results[timing_scene].n_substeps,
+  }
+  return MPMRuns(scenes, results, point)
+
+
+@dataclasses.dataclass
+class GNSRuns:
+  """A learned simulator over the study's scenes.
+
+  Attributes:
+    positions: per scene, [T, N, 2] the rollout's sand at ``frames``.
+    frames: [T] the stored frames its steps land on.
+    point: the table entry.
+  """
+  positions: list[np.ndarray]
+  frames: np.ndarray
+  point: dict[str, Any]
+
+
+def training_seconds(workdir: str) -> float | None:
+  """A run's training time (s): its provenance (a shipped model) or the
+  last row of its ``metrics.csv``."""
+  provenance = os.path.join(workdir, "provenance.json")
+  if os.path.exists(provenance):
+    with open(provenance) as f:
+      return json.load(f).get("training_time_s")
+  log = os.path.join(workdir, "metrics.csv")
+  if os.path.exists(log):
+    with open(log, newline="") as f:
+      rows = list(csv.DictReader(f))
+    if rows:
+      return float(rows[-1]["wall_time_s"])
+  return None
+
+
+def run_gns(name: str, workdir: str, run: run_lib.Run,
+            starts: MPMRuns, *, repeats: int, timing_scene: int,
+            progress: Callable[[], None] = lambda: None) -> GNSRuns:
+  """Rolls out every scene from the first frames of the MPM at the run's
+  own spacing (``starts``), with the solid constraint.
+
+  Seconds: a whole rollout after a warm-up rollout (compilation excluded),
+  synchronised, the median of ``repeats`` (``timing.time_calls``); compile:
+  the first rollout's extra time. The MPM frames it starts from are not
+  counted (the first (C - 1) k + 1 of 600 frames).
+  """
+  problem = run.problem
+  trajectories = [mpm_io.Trajectory.from_result(r) for r in starts.results]
+  roll = lambda t: rollout_lib.rollout_trajectory(run.model, run.params, t,
+                                                  problem)
+  positions = [None] * len(trajectories)
+  order = [timing_scene] + [i for i in range(len(trajectories))
+                            if i != timing_scene]
+  first_s = None
+  for i in order:
+    out, seconds = timing.wall(lambda: roll(trajectories[i]))
+    first_s = seconds if first_s is None else first_s
+    positions[i] = np.asarray(out.positions)
+    progress()
+  timed = timing.time_calls({"gns": lambda: roll(trajectories[timing_scene])},
+                            repeats)["gns"]
+  frames = rollout_lib.predicted_frame_indices(
+      len(trajectories[0].positions), problem.input_frames,
+      problem.frame_stride)
+  point = {
+      "name": name, "kind": "gns",
+      "label": f"GNS {name} (stride {problem.frame_stride}, spacing "
+               f"{starts.point['spacing'] * 1000:g} mm)",
+      "workdir": workdir, "step": run.step,
+      "spacing": starts.point["spacing"], "seconds": timed["median_s"],
+      "seconds_all": timed["all_s"], "seconds_batched": None,
+      "compile_s": max(first_s - timed["median_s"], 0.0),
+      "training_s": training_seconds(workdir),
+      "particles": starts.point["particles"],
+      "frame_stride": problem.frame_stride,
+  }
+  return GNSRuns(positions, np.asarray(frames), point)
+
+
+def scene_row(point: str, scene: mpm.Scene) -> dict[str, Any]:
+  return {"point": point, "scene": scene.name,
+          "group": dataset.group_of(scene.name),
+          "obstacles": len(scene.obstacles),
+          "shapes": sorted(o.shape for o in scene.obstacles),
+          "particles": scene.granular.num_particles}
+
+
+def table_rows(reference: MPMRuns, mpm_runs: Sequence[MPMRuns],
+               gns_runs: Sequence[GNSRuns], frames: np.ndarray
+               ) -> list[dict[str, Any]]:
+  """Every configuration's errors on every scene at ``frames``."""
+  rows = []
+  for i, ref_result in enumerate(reference.results):
+    ref = ref_result.positions[frames]
+    start = ref_result.positions[0]
+    for runs in mpm_runs:
+      rows.append({**scene_row(runs.point["name"], runs.scenes[i]),
+                   "seconds": runs.results[i].wall_time_s,
+                   **score(runs.results[i].positions[frames], ref, start,
+                           runs.scenes[i])})
+    for g in gns_runs:
+      index = np.searchsorted(g.frames, frames)
+      scene = next(r.scenes[i] for r in mpm_runs
+                   if r.point["spacing"] == g.point["spacing"])
+      rows.append({**scene_row(g.point["name"], scene), "seconds": None,
+                   **score(g.positions[i][index], ref, start, scene)})
+  return rows
+
+
+def summarise(points: Sequence[dict], rows: Sequence[dict]) -> list[dict]:
+  """Per configuration: its cost, median and worst error of each metric over
+  the scenes, and whether it is on the Pareto front (worst front error
+  against seconds per trajectory)."""
+  out = []
+  for p in points:
+    mine = [r for r in rows if r["point"] == p["name"]]
+    entry = dict(p)
+    for m in tradeoff.METRICS:
+      values = [math.inf if math.isnan(r[m]) else r[m] for r in mine]
+      entry[f"{m}_median"] = float(np.median(values))
+      entry[f"{m}_max"] = float(np.max(values))
+    out.append(entry)
+  front = tradeoff.pareto_front([e["seconds"] for e in out],
+                                [e["front_error_max"] for e in out])
+  for e, f in zip(out, front):
+    e["pareto"] = f
+  return out
+
+
+def _fmt(v, spec=".3g"):
+  return "-" if v is None else format(v, spec)
+
+
+def report(summary: Sequence[dict], table: dict[str, Any],
+           scenes: Sequence[mpm.Scene], tolerances: Sequence[float],
+           command: str) -> str:
+  """The Markdown report: the configurations, and which one to pick for
+  each test group (``scenes``: the study's scenes) and tolerance."""
+  env = table["environment"]
+  lines = [
+      "# Speed against accuracy: the MPM at several resolutions and the "
+      "learned simulator", "",
+      f"Command: `{command}`", "",
+      f"Machine: {env['platform']}, {env['cpu_count']} CPU cores, jax "
+      f"{env['jax_version']} on {env['jax_backend']}; load average at the "
+      f"start {env['load_average_start'][0]:.2f}, at the end "
+      f"{env.get('load_average_end', [math.nan])[0]:.2f}. Date "
+      f"{env['date']}.", "",
+      f"Reference: {table['reference']['label']}. "
+      f"{len(table['scenes'])} held-out scenes "
+      f"({', '.join(sorted({r['group'] for r in table['rows']}))}); errors "
+      f"at frames {table['frames'][0]}-{table['frames'][-1]} every "
+      f"{COMPARE_EVERY} (final: frame {table['frames'][-1]}).", "",
+      f"Seconds: per trajectory of {table['num_frames']} frames, one scene at "
+      "a time (the scene of the paper's 1000 particles), compilation apart "
+      "(compile: cold, no persistent cache); batched: "
+      "per trajectory when all scenes run as one vmapped program. Front: "
+      "|front - reference front| over the reference's runout distance. "
+      "Deposit: RMS height error of the final deposit profile (m, "
+      f"{PROFILE_BIN * 100:g} cm bins). Past: fraction of the sand past "
+      f"the lines x = {', '.join(f'{x:g}' for x in LINES)} m, mean absolute "
+      "difference over time, worst line. Inside: largest fraction of sand "
+      "deeper than half a spacing inside a solid. Median / worst over the "
+      "scenes.", "",
+      "| configuration | particles | s / traj | batched s / traj | compile "
+      "s | training h | front median / worst | deposit (m) median / worst "
+      "| past median / worst | inside worst | Pareto |",
+      "|---|---|---|---|---|---|---|---|---|---|---|"]
+  for e in summary:
+    training = (None if e["training_s"] is None else e["training_s"] / 3600)
+    lines.append(
+        f"| {e['label']} | {e['particles']} | {_fmt(e['seconds'])} | "
+        f"{_fmt(e['seconds_batched'])} | {_fmt(e['compile_s'], '.1f')} | "
+        f"{_fmt(training, '.2f')} | {e['front_error_median']:.1%} / "
+        f"{e['front_error_max']:.1%} | {e['deposit_error_median']:.3f} / "
+        f"{e['deposit_error_max']:.3f} | {e['past_error_median']:.3f} / "
+        f"{e['past_error_max']:.3f} | {e['inside_max']:.1%} | "
+        f"{'yes' if e['pareto'] else ''} |")
+  lines += ["", "## Which to pick (`gnsjax.tradeoff.cheapest`)", "",
+            "The cheapest configuration whose worst front error over the "
+            "matching study scenes meets the tolerance, one scene at a "
+            "time:", "",
+            "| scenes | " + " | ".join(f"front <= {t:.0%}" for t in tolerances)
+            + " |", "|---|" + "---|" * len(tolerances)]
+  groups = [("all", None)] + [
+      (g, next(s for s in scenes if
+               dataset.group_of(s.name) == g))
+      for g in sorted({r["group"] for r in table["rows"]})]
+  for label, scene in groups:
+    cells = []
+    for t in tolerances:
+      try:
+        c = tradeoff.cheapest(table, t, scene=scene)
+        cells.append(f"{c.point['name']} ({c.seconds:.2g} s)")
+      except mpm.InputError:
+        cells.append("none")
+    lines.append(f"| {label} | " + " | ".join(cells) + " |")
+  return "\n".join(lines) + "\n"
