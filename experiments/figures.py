@@ -25,6 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.animation as animation
 import matplotlib.patches as patches
 import matplotlib.pyplot as plt
+import matplotlib.ticker
 import numpy as np
 
 import mpm
@@ -267,23 +268,36 @@ def pareto(summary: Sequence[dict], path: str, batched: bool = False):
   """
   key = "seconds_batched" if batched else "seconds"
   fig, ax = plt.subplots(figsize=(6.5, 4.5))
-  shown = [e for e in summary if e[key] and e["front_error_max"] > 0
-           and np.isfinite(e["front_error_max"])]
-  for e in shown:
+  shown = sorted((e for e in summary if e[key] and e["front_error_max"] > 0
+                  and np.isfinite(e["front_error_max"])),
+                 key=lambda e: e[key])
+  for i, e in enumerate(shown):
     color = "k" if e["kind"] == "mpm" else "tab:blue"
     marker = "o" if e["kind"] == "mpm" else "s"
     ax.plot(e[key], e["front_error_max"], marker, color=color, ms=7)
     ax.plot(e[key], max(e["front_error_median"], 1e-4), marker, color=color,
             mfc="none", ms=7)
-    ax.annotate(e["name"], (e[key], e["front_error_max"]), fontsize=7,
-                xytext=(4, 4), textcoords="offset points")
+    label = (f"MPM {e['spacing'] * 1000:g} mm" if e["kind"] == "mpm"
+             else f"GNS {e['name']}")
+    # Neighbours in cost alternate above and below, so labels do not touch.
+    ax.annotate(label, (e[key], e["front_error_max"]), fontsize=7,
+                xytext=(4, 5 if i % 2 == 0 else -10),
+                textcoords="offset points")
   front = sorted((e[key], e["front_error_max"]) for e in shown if e["pareto"])
   if front:
     ax.plot(*zip(*front), "r--", lw=1, label="Pareto front (worst scene)")
-  ax.plot([], [], "ko", label="MPM (worst / median scene)")
-  ax.plot([], [], "s", color="tab:blue", label="GNS (worst / median scene)")
+  kinds = {e["kind"] for e in shown}
+  if "mpm" in kinds:
+    ax.plot([], [], "ko", label="MPM (worst / median scene)")
+  if "gns" in kinds:
+    ax.plot([], [], "s", color="tab:blue", label="GNS (worst / median scene)")
   ax.set_xscale("log")
   ax.set_yscale("log")
+  for axis in (ax.xaxis, ax.yaxis):   # plain numbers at 1, 2, 5 x 10^k
+    axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1, 2, 5)))
+    axis.set_major_formatter(
+        matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
   ax.set_xlabel("seconds per trajectory" + (" (batched)" if batched else ""))
   ax.set_ylabel("front error (fraction of the runout)")
   ax.legend(fontsize=7)

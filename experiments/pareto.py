@@ -30,6 +30,7 @@ from experiments.benchmarks import timing
 from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
+from gnsjax import simulator
 from gnsjax import tradeoff
 from mpm import dataset
 from mpm import io as mpm_io
@@ -132,7 +133,8 @@ def run_mpm(scenes: Sequence[mpm.Scene], spacing: float, *, repeats: int,
 
   Seconds: ``mpm.simulate``'s own clock (compilation excluded, every chunk
   synchronised), the median of ``repeats`` runs of scene ``timing_scene``
-  (its first run included). Batched: the scenes as one vmapped program
+  (its first run included). Compile: the longest over the scenes (a scene
+  whose program was already compiled reports 0). Batched: the scenes as one vmapped program
   (``mpm.simulate_batch``), per trajectory, median of ``repeats``.
   """
   scenes = [at_spacing(s, spacing) for s in scenes]
@@ -154,7 +156,7 @@ def run_mpm(scenes: Sequence[mpm.Scene], spacing: float, *, repeats: int,
                "mm)",
       "spacing": spacing, "seconds": statistics.median(samples),
       "seconds_all": samples, "seconds_batched": batch_s,
-      "compile_s": results[timing_scene].compile_time_s,
+      "compile_s": max(r.compile_time_s for r in results),
       "compile_batched_s": batch_compile, "training_s": None,
       "particles": scenes[timing_scene].granular.num_particles,
       "substeps_per_frame": results[timing_scene].n_substeps,
@@ -192,8 +194,35 @@ def training_seconds(workdir: str) -> float | None:
   return None
 
 
+def gns_batched_seconds(run: run_lib.Run,
+                        trajectories: Sequence[mpm_io.Trajectory],
+                        repeats: int) -> tuple[float, float]:
+  """Seconds per trajectory when every scene rolls out as one vmapped
+  program (``rollout.rollout_batch``), and that program's compile seconds.
+
+  The median of ``repeats`` synchronised batches after a warm-up batch
+  (whose extra time is the compile), divided by the number of scenes.
+  """
+  problem = run.problem
+  c, k = problem.input_frames, problem.frame_stride
+  scenes = [rollout_lib.trajectory_nodes(t, c, k, problem.boundary_particles,
+                                         problem.sdf_spacing)
+            for t in trajectories]
+  n_steps = len(rollout_lib.predicted_frame_indices(
+      len(trajectories[0].positions), c, k))
+  predictor = simulator.ModelPredictor(run.model)
+  batch = lambda: rollout_lib.rollout_batch(predictor, run.params, scenes,
+                                            n_steps, problem.context,
+                                            problem.spec)
+  _, first_s = timing.wall(batch)
+  timed = timing.time_calls({"batch": batch}, repeats)["batch"]
+  return (timed["median_s"] / len(scenes),
+          max(first_s - timed["median_s"], 0.0))
+
+
 def run_gns(name: str, workdir: str, run: run_lib.Run,
             starts: MPMRuns, *, repeats: int, timing_scene: int,
+            batched: bool = False,
             progress: Callable[[], None] = lambda: None) -> GNSRuns:
   """Rolls out every scene from the first frames of the MPM at the run's
   own spacing (``starts``), with the solid constraint.
@@ -201,7 +230,8 @@ def run_gns(name: str, workdir: str, run: run_lib.Run,
   Seconds: a whole rollout after a warm-up rollout (compilation excluded),
   synchronised, the median of ``repeats`` (``timing.time_calls``); compile:
   the first rollout's extra time. The MPM frames it starts from are not
-  counted (the first (C - 1) k + 1 of 600 frames).
+  counted (the first (C - 1) k + 1 of 600 frames). Batched: every scene as
+  one program (``gns_batched_seconds``).
   """
   problem = run.problem
   trajectories = [mpm_io.Trajectory.from_result(r) for r in starts.results]
@@ -221,14 +251,18 @@ def run_gns(name: str, workdir: str, run: run_lib.Run,
   frames = rollout_lib.predicted_frame_indices(
       len(trajectories[0].positions), problem.input_frames,
       problem.frame_stride)
+  batch_s, batch_compile = None, None
+  if batched:
+    batch_s, batch_compile = gns_batched_seconds(run, trajectories, repeats)
   point = {
       "name": name, "kind": "gns",
       "label": f"GNS {name} (stride {problem.frame_stride}, spacing "
                f"{starts.point['spacing'] * 1000:g} mm)",
       "workdir": workdir, "step": run.step,
       "spacing": starts.point["spacing"], "seconds": timed["median_s"],
-      "seconds_all": timed["all_s"], "seconds_batched": None,
+      "seconds_all": timed["all_s"], "seconds_batched": batch_s,
       "compile_s": max(first_s - timed["median_s"], 0.0),
+      "compile_batched_s": batch_compile,
       "training_s": training_seconds(workdir),
       "particles": starts.point["particles"],
       "frame_stride": problem.frame_stride,

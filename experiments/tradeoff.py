@@ -115,6 +115,7 @@ def main(argv):
     gns_runs.append(pareto.run_gns(name, workdir, run, start,
                                    repeats=_REPEATS.value,
                                    timing_scene=timing_scene,
+                                   batched=True,
                                    progress=lambda: bar.update(1)))
   bar.close()
   timing.end_environment(env)

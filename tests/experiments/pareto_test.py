@@ -107,7 +107,7 @@ class StudyTest(absltest.TestCase):
                                    batched=False)
     run = run_lib.load_run(PRETRAINED)
     cls.gns = pareto.run_gns("small", PRETRAINED, run, cls.reference,
-                             repeats=1, timing_scene=1)
+                             repeats=1, timing_scene=1, batched=True)
     cls.frames = pareto.compare_frames(31, [cls.gns.frames])
     cls.rows = pareto.table_rows(cls.reference, [cls.coarse, cls.reference],
                                  [cls.gns], cls.frames)
@@ -124,6 +124,8 @@ class StudyTest(absltest.TestCase):
     self.assertEqual((g["kind"], g["frame_stride"], g["spacing"]),
                      ("gns", 3, 0.01))
     self.assertGreater(g["training_s"], 3600)   # from its provenance
+    self.assertGreater(g["seconds_batched"], 0)
+    self.assertGreaterEqual(g["compile_batched_s"], 0)
     np.testing.assert_array_equal(self.frames, [30])
 
   def test_rows_score_against_the_reference(self):
