@@ -260,7 +260,8 @@ def agree_max(values: Sequence[int]) -> tuple[int, ...]:
   values themselves in one process). Every process must call it."""
   if jax.process_count() == 1:
     return tuple(int(v) for v in values)
-  from jax.experimental import multihost_utils  # pylint: disable=g-import-not-at-top
+  # pylint: disable-next=g-import-not-at-top
+  from jax.experimental import multihost_utils
   gathered = multihost_utils.process_allgather(np.asarray(values, np.int32))
   return tuple(int(v) for v in np.max(np.asarray(gathered), axis=0))
 

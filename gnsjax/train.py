@@ -266,7 +266,8 @@ class Trainer:
     process gives its copy, the same in all of them)."""
     if not self.multi:
       return jax.device_put(tree, self.replicated)
-    from jax.experimental import multihost_utils  # pylint: disable=g-import-not-at-top
+    # pylint: disable-next=g-import-not-at-top
+    from jax.experimental import multihost_utils
 
     def one(x):
       if isinstance(x, jax.Array) and not x.is_fully_addressable:
@@ -614,6 +615,7 @@ def _from_process_0(value: float) -> float:
   """Process 0's ``value`` (a float or bool) in every process."""
   if jax.process_count() == 1:
     return value
-  from jax.experimental import multihost_utils  # pylint: disable=g-import-not-at-top
+  # pylint: disable-next=g-import-not-at-top
+  from jax.experimental import multihost_utils
   got = multihost_utils.broadcast_one_to_all(np.float32(value))
   return type(value)(np.asarray(got).item())

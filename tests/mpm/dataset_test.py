@@ -281,9 +281,10 @@ class DatasetTest(absltest.TestCase):
       dataset._write_spec_once(SPEC, parts)  # pylint: disable=protected-access
       dataset._write_spec_once(SPEC, parts)  # pylint: disable=protected-access
       other = dataclasses.replace(SPEC, num_frames=8)
+      write_once = dataset._write_spec_once  # pylint: disable=protected-access
       with self.assertRaisesRegex(dataset.scene_lib.InputError,
                                   "num_frames 12 .this config: 8."):
-        dataset._write_spec_once(other, parts)  # pylint: disable=protected-access
+        write_once(other, parts)
       self.assertEqual(os.listdir(parts), ["spec.json"])
       self.assertEqual(mpm_io.read_json(os.path.join(parts, "spec.json")),
                        dataclasses.asdict(SPEC))
