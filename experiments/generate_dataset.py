@@ -6,6 +6,10 @@
 Killed at any moment, the same command continues where it stopped. A
 directory holding a dataset (or the parts of one) of another config is
 refused.
+
+Across processes or hosts sharing a filesystem (docs/scaling.md): run
+``--shard=i/N`` for each i in 0..N-1 (in any order, at once or not), then
+once ``--assemble``; the dataset is the one a single run writes.
 """
 
 import sys
@@ -25,6 +29,12 @@ _WORKERS = flags.DEFINE_integer("workers", None,
                                 lower_bound=1)
 _VERIFY = flags.DEFINE_bool("verify", False,
                             "Check an existing dataset instead of generating.")
+_SHARD = flags.DEFINE_string(
+    "shard", None, "i/N: simulate only share i of N of the trajectories "
+    "(then run --assemble once all N are done).")
+_ASSEMBLE = flags.DEFINE_bool(
+    "assemble", False, "Assemble the parts the --shard runs wrote into the "
+    "dataset.")
 
 
 def main(argv):
@@ -38,10 +48,20 @@ def main(argv):
           f"({len(problems)} problems)")
     sys.exit(1 if problems else 0)
   spec = dataset.DatasetSpec(**_CONFIG.value.dataset.to_dict())
+  if _ASSEMBLE.value and _SHARD.value is not None:
+    raise runtime.InputError(f"--shard={_SHARD.value} with --assemble; "
+                             "allowed: one of them")
+  shard = None if _SHARD.value is None else dataset.Shard.parse(_SHARD.value)
   runtime.writable("out", _OUT.value)
   dataset.check_target(spec, _OUT.value)
+  if _ASSEMBLE.value:
+    runtime.existing_dir("out", _OUT.value)
+    metadata = dataset.assemble_parts(spec, _OUT.value)
+    _report(metadata)
+    return
   workers = _WORKERS.value or _CONFIG.value.workers
-  total = spec.num_train + spec.num_test
+  total = (spec.num_train + spec.num_test if shard is None else
+           len(shard.take(dataset.plan(spec))))
   cache = runtime.enable_compilation_cache()
   with tqdm.tqdm(total=total, unit="traj") as bar:
     def progress(done, _, wall):
@@ -49,7 +69,17 @@ def main(argv):
       if wall:
         bar.set_postfix(last_s=f"{wall:.2f}")
     metadata = dataset.generate(spec, _OUT.value, workers=workers,
-                                progress=progress, compilation_cache=cache)
+                                progress=progress, compilation_cache=cache,
+                                shard=shard)
+  if "shard" in metadata:
+    print(f"{_OUT.value}: shard {metadata['shard']} done "
+          f"({metadata['parts']} trajectories); once every shard is done, "
+          "run once with --assemble")
+    return
+  _report(metadata)
+
+
+def _report(metadata):
   wall = metadata["wall_time_s"]
   print(f"{_OUT.value}: {metadata['num_train']} train + "
         f"{metadata['num_test']} test "

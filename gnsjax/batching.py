@@ -10,7 +10,7 @@ window carries its scene's SDF grid, from which the model sees the solids. Each 
 Shapes: B windows, C + 1 frames (C inputs and the target), N padded nodes.
 """
 
-from typing import NamedTuple, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -79,12 +79,20 @@ def window_nodes(window: data.Window, radius: float, boundary: bool = True):
 
 def make_batch(windows: Sequence[data.Window], spec: graph.GraphSpec,
                node_bucket: int = 128, boundary: bool = True,
-               sdf_spacing: float = 0.005) -> Batch:
+               sdf_spacing: float = 0.005,
+               agree: Callable[[Sequence[int]], Sequence[int]] | None = None
+               ) -> Batch:
   """Pads the windows' nodes to one bucketed count and stacks them, with
-  each window's SDF grid at ``sdf_spacing`` (m)."""
+  each window's SDF grid at ``sdf_spacing`` (m).
+
+  ``agree`` (``gnsjax.distributed.agree_max``), when these windows are one
+  process's share of a batch: the count is then the largest over all
+  processes, the count one process holding the whole batch pads to."""
   nodes = [window_nodes(w, spec.radius, boundary) for w in windows]
   n = max(len(t) for _, t, _ in nodes)
   n = -(-n // node_bucket) * node_bucket
+  if agree is not None:
+    (n,) = agree((n,))
   positions, types, moving = [], [], []
   for p, t, m in nodes:
     k = n - len(t)

@@ -37,7 +37,7 @@ Shapes: N nodes (padded count), B windows, E edge capacity.
 import dataclasses
 import functools
 import math
-from typing import Set, Tuple
+from typing import Callable, Sequence, Set, Tuple
 
 from absl import logging
 import jax
@@ -54,6 +54,9 @@ _PARKING_SPACING = 2.5
 _PARKING_TOLERANCE = 1e-3
 # Margin of the search box around the domain, in radii.
 _MARGIN = 2.0
+# The elementwise maximum of some integers over the processes that each hold
+# part of a batch (gnsjax.distributed.agree_max).
+Agree = Callable[[Sequence[int]], Sequence[int]]
 
 
 def _jax_md_rank_promotion():
@@ -329,9 +332,17 @@ def _max_cell_capacity(lists) -> int | None:
   return max(capacities)
 
 
+def _agreed(agree, capacity: int, cell_capacity: int | None):
+  """(capacity, cell capacity) at their maximum over the processes."""
+  capacity, cell = agree((capacity, -1 if cell_capacity is None else
+                          cell_capacity))
+  return capacity, None if cell < 0 else cell
+
+
 def allocate_batch(
     spec: GraphSpec, positions: jax.Array,
-    capacities: tuple[int, int | None] | None = None
+    capacities: tuple[int, int | None] | None = None,
+    agree: Agree | None = None
 ) -> partition.NeighborList:
   """Allocates one list per window, at the largest capacities. Not jittable.
 
@@ -342,6 +353,10 @@ def allocate_batch(
       resumed run's, from ``capacities``): the edges are then built exactly
       as an ``update`` of a list of these sizes builds them, and the list
       is reallocated larger only if they do not fit.
+    agree: for a batch split over processes (each holding its windows):
+      the elementwise maximum of integers over processes
+      (``gnsjax.distributed.agree_max``), so that all allocate the sizes
+      one process holding the whole batch would.
 
   Returns:
     A list whose array leaves carry a leading batch axis: idx [B, 2, E]
@@ -351,6 +366,8 @@ def allocate_batch(
   lists = [allocate(spec, p) for p in positions]
   capacity = max(l.max_occupancy for l in lists)
   cell_capacity = _max_cell_capacity(lists)
+  if agree is not None:
+    capacity, cell_capacity = _agreed(agree, capacity, cell_capacity)
   lists = [_with_capacity(l, capacity, cell_capacity) for l in lists]
   nbrs = jax.tree.map(lambda *leaves: jnp.stack(leaves), *lists)
   if capacities is None:
@@ -365,7 +382,8 @@ def allocate_batch(
                          nbrs.idx.dtype),
       max_occupancy=capacity, cell_list_capacity=cell_capacity,
       reference_position=nbrs.reference_position + 1.0)
-  return update_or_reallocate(spec, positions, shell, batched=True)[0]
+  return update_or_reallocate(spec, positions, shell, batched=True,
+                              agree=agree)[0]
 
 
 def update_batch(spec: GraphSpec, positions: jax.Array,
@@ -421,7 +439,8 @@ def _update_batch_jit(spec, positions, nbrs):
 
 def update_or_reallocate(
     spec: GraphSpec, positions: jax.Array, nbrs: partition.NeighborList,
-    batched: bool = False) -> Tuple[partition.NeighborList, bool]:
+    batched: bool = False, agree: Agree | None = None
+) -> Tuple[partition.NeighborList, bool]:
   """Updates the list; on overflow reallocates it from `positions`. Host only.
 
   Runs a jitted ``update`` (``update_batch`` if batched); if that overflowed,
@@ -434,6 +453,8 @@ def update_or_reallocate(
     positions: [N, 2] (or [B, N, 2] if batched) world positions (m).
     nbrs: the current list (batched if `batched`).
     batched: whether the list and positions carry a batch axis.
+    agree: see ``allocate_batch`` (batched only): all processes then
+      reallocate when any overflowed, to the same sizes.
 
   Returns:
     (nbrs, reallocated): the list for `positions`, and whether it was
@@ -441,9 +462,13 @@ def update_or_reallocate(
   """
   positions = _check_positions(positions, batched=batched)
   new = (_update_batch_jit if batched else _update_jit)(spec, positions, nbrs)
-  if not bool(jnp.any(new.did_buffer_overflow)):
+  overflow = bool(jnp.any(new.did_buffer_overflow))
+  if agree is not None:
+    overflow = bool(agree((int(overflow),))[0])
+  if not overflow:
     return new, False
-  fresh = (allocate_batch if batched else allocate)(spec, positions)
+  fresh = (functools.partial(allocate_batch, agree=agree) if batched else
+           allocate)(spec, positions)
   capacity = max(fresh.max_occupancy, nbrs.max_occupancy)
   cell_capacity = _max_cell_capacity([fresh, nbrs])
   fresh = _with_capacity(fresh, capacity, cell_capacity)

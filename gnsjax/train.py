@@ -8,10 +8,17 @@ MSE of normalised acceleration; Adam with gradient clipping and the GNS
 exponential learning-rate decay. A run killed at any moment resumes from its
 last checkpoint and produces the same losses as an uninterrupted run.
 
-Data-parallel over all local devices: the batch axis is sharded over a
-one-axis mesh ("batch") and parameters are replicated (``jax.sharding``).
+Data-parallel over all devices: the batch axis is sharded over a one-axis
+mesh ("batch") and parameters are replicated (``jax.sharding``). Across
+processes (``gnsjax.distributed``) the mesh holds every process's devices;
+each process reads and pads only its rows of every batch and builds their
+graphs, agreeing with the others on the padded node count and the neighbour
+lists' sizes, so the losses are those of one process with the same global
+batch. Process 0 writes the logs; all save the checkpoints (orbax writes
+each once) and all restore them.
 """
 
+import contextlib
 import csv
 import functools
 import json
@@ -32,6 +39,7 @@ import tqdm
 from gnsjax import batching
 from gnsjax import checkpoint
 from gnsjax import data
+from gnsjax import distributed
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import metrics as metrics_lib
@@ -164,7 +172,8 @@ def check_compatible(stored: dict, config) -> None:
 
 
 def _mesh():
-  devices = np.array(jax.local_devices())
+  # Every process's devices: jax.devices() is the same list in all of them.
+  devices = np.array(jax.devices())
   return jax.sharding.Mesh(devices, ("batch",))
 
 
@@ -181,6 +190,10 @@ class Trainer:
         self.mesh, jax.sharding.PartitionSpec("batch"))
     self.replicated = jax.sharding.NamedSharding(
         self.mesh, jax.sharding.PartitionSpec())
+    self.multi = jax.process_count() > 1
+    # In one process None: the code path (and the numbers) of a run that
+    # never heard of processes.
+    self._agree = distributed.agree_max if self.multi else None
     self._nbrs = {}  # padded node count -> batched neighbour list
     ctx, radius = problem.context, problem.radius
     noise_std = problem.noise_std
@@ -236,7 +249,8 @@ class Trainer:
     saved = self._restored_capacities.get(kind, {}).get(
         str(positions.shape[1]))
     return graph.allocate_batch(self.problem.spec, positions,
-                                None if saved is None else tuple(saved))
+                                None if saved is None else tuple(saved),
+                                agree=self._agree)
 
   def init_state(self, seed: int) -> TrainState:
     init_key, key = jax.random.split(jax.random.key(seed))
@@ -245,25 +259,71 @@ class Trainer:
         features.num_node_features(self.config.train.input_frames))
     state = TrainState(jnp.zeros((), jnp.int32), params,
                        self.tx.init(params), key)
-    return jax.device_put(state, self.replicated)
+    return self.replicate(state)
+
+  def replicate(self, tree):
+    """``tree``'s arrays replicated over the mesh (across processes: each
+    process gives its copy, the same in all of them)."""
+    if not self.multi:
+      return jax.device_put(tree, self.replicated)
+    # pylint: disable-next=g-import-not-at-top
+    from jax.experimental import multihost_utils
+
+    def one(x):
+      if isinstance(x, jax.Array) and not x.is_fully_addressable:
+        return x  # already global (restored by orbax onto the mesh)
+      return multihost_utils.host_local_array_to_global_array(
+          x, self.mesh, jax.sharding.PartitionSpec())
+    return jax.tree.map(one, tree)
 
   def graph_edges(self, positions: jax.Array):
-    """Senders, receivers [B, E] of the last input frame [B, N, 2]."""
+    """Senders, receivers [B, E] of the last input frame [B, N, 2] (across
+    processes: of this process's rows, from and to host arrays)."""
+    if self.multi:
+      positions = _process_rows(positions)
     n = positions.shape[1]
     spec = self.problem.spec
     nbrs = self._nbrs.get(n)
     if nbrs is None:
       nbrs = self._allocate("train", positions)
-    nbrs, _ = graph.update_or_reallocate(spec, positions, nbrs, batched=True)
+    nbrs, _ = graph.update_or_reallocate(spec, positions, nbrs, batched=True,
+                                         agree=self._agree)
     self._nbrs[n] = nbrs
-    return _batched_edges(nbrs, n)
+    senders, receivers = _batched_edges(nbrs, n)
+    if self.multi:
+      senders, receivers = np.asarray(senders), np.asarray(receivers)
+    return senders, receivers
+
+  def rows(self, batch_size: int) -> range:
+    """The rows of a global batch of ``batch_size`` that this process reads
+    (all of them in one process)."""
+    index = self.batch_sharding.addressable_devices_indices_map(
+        (batch_size,)).values()
+    starts = [i[0].indices(batch_size) for i in index]
+    return range(min(a for a, _, _ in starts), max(b for _, b, _ in starts))
 
   def make_batch(self, windows) -> batching.Batch:
-    """The padded batch of some windows, with this run's node choice."""
+    """The padded batch of some windows, with this run's node choice
+    (across processes: this process's rows of a batch)."""
     return batching.make_batch(windows, self.problem.spec,
                                self.config.train.node_bucket,
                                self.problem.boundary_particles,
-                               self.problem.sdf_spacing)
+                               self.problem.sdf_spacing, agree=self._agree)
+
+  def put(self, rows: np.ndarray) -> jax.Array:
+    """A global array, batch-sharded, from this process's ``rows``."""
+    if not self.multi:
+      return jax.device_put(rows, self.batch_sharding)
+    rows = np.asarray(rows)
+    shape = (rows.shape[0] * jax.process_count(),) + rows.shape[1:]
+    return jax.make_array_from_process_local_data(self.batch_sharding, rows,
+                                                  shape)
+
+  def local_params(self, params):
+    """``params`` as arrays this process can use alone (rollouts)."""
+    if not self.multi:
+      return params
+    return jax.tree.map(lambda x: np.asarray(x.addressable_data(0)), params)
 
   def batch_arrays(self, batch: batching.Batch, key: jax.Array,
                    noise: bool = True, params=None,
@@ -279,7 +339,7 @@ class Trainer:
     steps later the target, so the model learns to correct the errors it
     makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
     """
-    put = lambda a: jax.device_put(a, self.batch_sharding)
+    put = self.put
     c = self.problem.input_frames
     positions, moving = put(batch.positions), put(batch.moving)
     types = put(batch.particle_type)
@@ -327,13 +387,22 @@ class Trainer:
     return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
 
 
+def _process_rows(x: jax.Array) -> np.ndarray:
+  """This process's rows of a batch-sharded global array, on the host."""
+  shards = sorted(x.addressable_shards, key=lambda s: s.index[0].start or 0)
+  return np.concatenate([np.asarray(s.data) for s in shards])
+
+
 @functools.partial(jax.jit, static_argnums=1)
 def _batched_edges(nbrs, n):
   return jax.vmap(lambda nb: graph.edges(nb, n))(nbrs)
 
 
-def _windows(dataset: data.WindowDataset, step: int, batch_size: int):
-  return [dataset[step * batch_size + i] for i in range(batch_size)]
+def _windows(dataset: data.WindowDataset, step: int, batch_size: int,
+             rows: range | None = None):
+  """The windows of batch ``step`` (only ``rows`` of it, if given)."""
+  rows = range(batch_size) if rows is None else rows
+  return [dataset[step * batch_size + i] for i in rows]
 
 
 def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
@@ -347,16 +416,20 @@ def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
                           frame_stride=problem.frame_stride, seed=0) as ds:
     windows = [ds[k] for k in range(min(num_windows, len(ds)))]
   losses = []
+  rows = trainer.rows(cfg.train.batch_size)
   for i in range(0, len(windows), cfg.train.batch_size):
     chunk = windows[i:i + cfg.train.batch_size]
     if len(chunk) < cfg.train.batch_size:
       break
+    chunk = [chunk[r] for r in rows]
     graphs, target = trainer.batch_arrays(trainer.make_batch(chunk), None,
                                           noise=False)
     losses.append(float(trainer.eval_loss(state.params, graphs, target)))
   if losses:
     metrics["eval/one_step_loss"] = float(np.mean(losses))
   if rollout_steps > 0 and num_rollouts > 0:
+    # Every process rolls out the same trajectories (the same numbers).
+    params = trainer.local_params(state.params)
     errors, baseline = [], []
     for k, t in enumerate(data.trajectories(test_path)):
       if k >= num_rollouts:
@@ -365,7 +438,7 @@ def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
           len(t.positions), problem.input_frames, problem.frame_stride)
       frames = frames[:rollout_steps]
       pred = rollout_lib.rollout_trajectory(
-          trainer.model, state.params, t, problem, len(frames)).positions
+          trainer.model, params, t, problem, len(frames)).positions
       truth = t.positions[frames]
       errors.append(np.mean(np.sum((pred - truth)**2, -1)))
       const = metrics_lib.constant_velocity(t.positions, frames,
@@ -399,13 +472,20 @@ def _resume_csv(path: str, step: int) -> float:
 
 def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                        workdir: str) -> dict:
-  """Trains (or resumes) in ``workdir``; returns the last metrics."""
+  """Trains (or resumes) in ``workdir``; returns the last metrics.
+
+  Across processes (after ``gnsjax.distributed.initialize``) every process
+  calls it with the same arguments; ``workdir`` and ``data_dir`` must be on
+  a filesystem they share.
+  """
   check_config(config)
+  distributed.check_supported(config, jax.process_count())
   os.makedirs(workdir, exist_ok=True)
   cfg, tcfg = config, config.train
-  if tcfg.batch_size % jax.local_device_count():
+  if tcfg.batch_size % jax.device_count():
     raise InputError(f"train.batch_size = {tcfg.batch_size} must be a "
-                     f"multiple of the {jax.local_device_count()} devices")
+                     f"multiple of the {jax.device_count()} devices")
+  lead = jax.process_index() == 0  # writes the logs
   mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
                             cfg.checkpoint.named_steps, cfg.checkpoint.keep)
   config_dict = _config_dict(config)
@@ -422,10 +502,11 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
     state, _, _ = checkpoint.restore(mngr, state)
     trainer.restore_graph_capacities(
         checkpoint.read_graph_capacities(mngr, int(state.step)))
-    state = jax.device_put(state, trainer.replicated)
+    state = trainer.replicate(state)
     logging.info("resumed from step %d", int(state.step))
-  mpm_io.write_json(os.path.join(workdir, "config.json"), config_dict)
-  mpm_io.write_json(os.path.join(workdir, "stats.json"), problem.to_dict())
+  if lead:
+    mpm_io.write_json(os.path.join(workdir, "config.json"), config_dict)
+    mpm_io.write_json(os.path.join(workdir, "stats.json"), problem.to_dict())
 
   # At probability 0 pushforward is off: the windows (and so the stream of
   # examples and the losses) are those of a run without it.
@@ -447,28 +528,37 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
         input_frames=tcfg.input_frames + pushforward,
         frame_stride=tcfg.frame_stride, node_bucket=tcfg.node_bucket,
         sdf_spacing=problem.sdf_spacing)
-  writer = tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
+  writer = (tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
+            if lead else None)
   csv_path = os.path.join(workdir, "metrics.csv")
   schedule = learning_rate_schedule(tcfg.lr_init, tcfg.lr_min,
                                     tcfg.lr_decay_steps)
   start = int(state.step)
   metrics = {}
-  trained_before = _resume_csv(csv_path, start)
+  # The logged training time is process 0's (the others read its log).
+  trained_before = _resume_csv(csv_path, start) if lead else 0.0
+  trained_before = _from_process_0(trained_before)
   run_start = last_time = time.perf_counter()
   last_step = start
-  with open(csv_path, "a", newline="") as csv_file, tqdm.tqdm(
-      initial=start, total=tcfg.num_steps, unit="step") as bar:
-    out = csv.DictWriter(csv_file, fieldnames=_CSV_FIELDS,
-                         extrasaction="ignore")
-    if csv_file.tell() == 0:
-      out.writeheader()
+  rows = trainer.rows(tcfg.batch_size)
+  with (open(csv_path, "a", newline="") if lead else
+        contextlib.nullcontext()) as csv_file, tqdm.tqdm(
+            initial=start, total=tcfg.num_steps, unit="step",
+            disable=not lead) as bar:
+    out = None
+    if lead:
+      out = csv.DictWriter(csv_file, fieldnames=_CSV_FIELDS,
+                           extrasaction="ignore")
+      if csv_file.tell() == 0:
+        out.writeheader()
     for step in range(start, tcfg.num_steps):
       if device_windows is not None:
         where = np.array([dataset.locate(step * tcfg.batch_size + i)
                           for i in range(tcfg.batch_size)])
         batch = device_windows.batch(where[:, 0], where[:, 1])
       else:
-        batch = trainer.make_batch(_windows(dataset, step, tcfg.batch_size))
+        batch = trainer.make_batch(_windows(dataset, step, tcfg.batch_size,
+                                            rows))
       # A pure function of (seed, step), so a resumed run pushes forward at
       # the same steps.
       push = pushforward if pushforward and np.random.default_rng(
@@ -485,10 +575,11 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                        steps_per_s=(done - last_step) / (now - last_time),
                        wall_time_s=trained_before + now - run_start)
         last_time, last_step = now, done
-        out.writerow({"step": done, **metrics})
-        csv_file.flush()
-        for k in ("loss", "grad_norm", "learning_rate", "steps_per_s"):
-          writer.add_scalar(f"train/{k}", metrics[k], done)
+        if lead:
+          out.writerow({"step": done, **metrics})
+          csv_file.flush()
+          for k in ("loss", "grad_norm", "learning_rate", "steps_per_s"):
+            writer.add_scalar(f"train/{k}", metrics[k], done)
         bar.set_postfix(loss=f"{metrics['loss']:.4g}")
       bar.update(1)
       if cfg.eval.every_steps and (done % cfg.eval.every_steps == 0 or
@@ -496,20 +587,35 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
         eval_metrics = evaluate(trainer, state, data_dir,
                                 cfg.eval.num_windows, cfg.eval.rollout_steps,
                                 cfg.eval.num_rollouts)
-        for k, v in eval_metrics.items():
-          writer.add_scalar(k, v, done)
+        if lead:
+          for k, v in eval_metrics.items():
+            writer.add_scalar(k, v, done)
         logging.info("step %d: %s", done, eval_metrics)
         metrics.update(eval_metrics)
-      out_of_time = (tcfg.max_wall_time_s and time.perf_counter() - run_start
-                     + trained_before >= tcfg.max_wall_time_s)
+      out_of_time = bool(tcfg.max_wall_time_s and time.perf_counter() -
+                         run_start + trained_before >= tcfg.max_wall_time_s)
+      if tcfg.max_wall_time_s:
+        # Clocks differ: all stop when process 0's budget is spent.
+        out_of_time = _from_process_0(out_of_time)
       checkpoint.save(mngr, done, state, config_dict, problem.to_dict(),
                       trainer.graph_capacities(),
-                      force=done == tcfg.num_steps or bool(out_of_time))
+                      force=done == tcfg.num_steps or out_of_time)
       if out_of_time:
         logging.info("stopping at step %d: max_wall_time_s = %s reached",
                      done, tcfg.max_wall_time_s)
         break
-  writer.close()
+  if writer is not None:
+    writer.close()
   dataset.close()
   mngr.close()
   return metrics
+
+
+def _from_process_0(value: float) -> float:
+  """Process 0's ``value`` (a float or bool) in every process."""
+  if jax.process_count() == 1:
+    return value
+  # pylint: disable-next=g-import-not-at-top
+  from jax.experimental import multihost_utils
+  got = multihost_utils.broadcast_one_to_all(np.float32(value))
+  return type(value)(np.asarray(got).item())

@@ -12,8 +12,17 @@ written temporary files are discarded, nothing is duplicated.
 Worker processes die with the generator (even on kill -9), so none is left
 writing parts after it. One generator runs per directory at a time: it holds
 an exclusive ``flock`` on the directory, and a second one fails at once. Temp
-files carry their writer's pid, and a rerun removes only those whose writer
-is gone.
+files carry their writer's host and pid, and a rerun removes only this
+host's whose writer is gone.
+
+Sharded (``generate(..., shard=Shard(i, N))``, one process per share, on one
+host or several sharing a filesystem): share i is the trajectories k of the
+plan with k mod N = i; each shard holds a shared lock on the directory and
+an exclusive one on its share, writes only its parts, and ``spec.json`` is
+written once (a hard link: first writer wins, the others check it). One
+``assemble_parts`` afterwards writes what an unsharded run writes. Sharing
+a filesystem is the only assumption: the results do not depend on the locks
+(two processes on one share write the same parts, each atomically).
 
 The test split is planned so that the paper's breakdowns can be computed:
 obstacle count (0, 1, 2), particle count (700, 1000, 1500 at the paper's
@@ -32,6 +41,7 @@ import multiprocessing
 import os
 import shutil
 import signal
+import socket
 import sys
 import threading
 import time
@@ -258,10 +268,17 @@ def _pid_alive(pid: int) -> bool:
 
 
 def _remove_stale_temps(parts_dir: str) -> None:
-  """Removes temp files (``*.tmp-<pid>``) whose writer is no longer alive."""
+  """Removes temp files (``mpm_io.temp_path``) whose writer is gone.
+
+  Only this host's are judged (a pid means nothing on another host); the
+  others' are left to their writers, and to ``assemble``.
+  """
+  here = socket.gethostname()
   for path in glob.glob(os.path.join(parts_dir, "*.tmp-*")):
-    pid = path.rsplit(".tmp-", 1)[1]
-    if not pid.isdigit() or not _pid_alive(int(pid)):
+    host, pid = mpm_io.temp_writer(path)
+    if host not in (None, here.replace("/", "_")):
+      continue
+    if pid is None or not _pid_alive(pid):
       with contextlib.suppress(FileNotFoundError):
         os.remove(path)  # half-written by a killed run
 
@@ -271,32 +288,77 @@ class GeneratorBusyError(RuntimeError):
 
 
 @contextlib.contextmanager
-def _exclusive(out_dir: str):
-  """Holds an exclusive lock on the directory ``out_dir`` (POSIX flock).
-
-  The kernel releases it when the holder dies, however it dies.
+def _locked(path: str, busy: str, shared: bool = False):
+  """Holds a POSIX ``flock`` on ``path`` (a directory, or a file created
+  for it), exclusive or ``shared``; GeneratorBusyError(``busy``) if it is
+  taken. The kernel releases it when the holder dies, however it dies.
   """
   try:
     import fcntl  # pylint: disable=g-import-not-at-top
   except ImportError:  # not POSIX: no lock
     yield
     return
-  fd = os.open(out_dir, os.O_RDONLY)
+  if os.path.isdir(path):
+    fd = os.open(path, os.O_RDONLY)
+  else:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
   try:
     try:
-      fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+      fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+                  | fcntl.LOCK_NB)
     except BlockingIOError:
-      raise GeneratorBusyError(
-          f"{out_dir}: another generator is running on this directory; "
-          "wait for it (or kill it) and rerun") from None
+      raise GeneratorBusyError(busy) from None
     yield
   finally:
     os.close(fd)
 
 
+def _exclusive(out_dir: str):
+  """Holds an exclusive lock on the directory ``out_dir``: no other
+  generator, sharded or not, runs on it meanwhile."""
+  return _locked(out_dir, f"{out_dir}: another generator is running on this "
+                 "directory; wait for it (or kill it) and rerun")
+
+
+@dataclasses.dataclass(frozen=True)
+class Shard:
+  """Share ``index`` of ``count`` of a dataset's trajectories (``i/N``).
+
+  Trajectory k of ``plan`` (train then test) belongs to share k mod N, so
+  the shares are disjoint, cover the plan, and mix both splits evenly.
+  """
+  index: int
+  count: int
+
+  def __post_init__(self):
+    if (isinstance(self.count, bool) or not isinstance(self.count, int) or
+        self.count < 1 or not isinstance(self.index, int) or
+        not 0 <= self.index < self.count):
+      raise scene_lib.InputError(
+          f"--shard={self.index}/{self.count}; allowed: i/N with integers "
+          "N >= 1 and 0 <= i < N")
+
+  @classmethod
+  def parse(cls, text: str) -> "Shard":
+    """``"i/N"`` -> Shard(i, N); InputError naming the text otherwise."""
+    index, sep, count = text.strip().partition("/")
+    if not sep or not index.strip().isdigit() or not count.strip().isdigit():
+      raise scene_lib.InputError(
+          f"--shard={text}; allowed: i/N with integers N >= 1 and "
+          "0 <= i < N (e.g. 0/4)")
+    return cls(int(index), int(count))
+
+  def take(self, items: Sequence[PlannedScene]) -> list[PlannedScene]:
+    return [it for k, it in enumerate(items) if k % self.count == self.index]
+
+  def __str__(self):
+    return f"{self.index}/{self.count}"
+
+
 def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
              progress: Callable[[int, int, float], None] | None = None,
-             compilation_cache: str | None = None) -> dict:
+             compilation_cache: str | None = None,
+             shard: Shard | None = None) -> dict:
   """Generates (or finishes) the dataset in ``out_dir``.
 
   Args:
@@ -304,23 +366,65 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
     compilation_cache: persistent compilation cache for worker processes.
     progress: called as progress(done, total, wall_time_s) after each
       trajectory (also for parts found finished from an earlier run).
+    shard: simulate only this share of the trajectories and stop, leaving
+      the parts for ``assemble_parts`` (other shares may run meanwhile, in
+      other processes or on other hosts sharing the filesystem).
 
   Returns:
-    The metadata written (or found, if the dataset is complete).
+    The metadata written (or found, if the dataset is complete); for a
+    shard, {"shard": "i/N", "parts": its part count} (or the metadata if
+    the dataset is already complete).
 
   Raises:
     InputError: ``out_dir`` holds a dataset or parts of another spec.
-    GeneratorBusyError: another generator is running on ``out_dir``.
+    GeneratorBusyError: another generator is running on ``out_dir`` (for
+      a shard: one that is not sharded, or on the same shard).
   """
   check_target(spec, out_dir)
   meta_path = os.path.join(out_dir, "metadata.json")
   if os.path.exists(meta_path):
     return mpm_io.read_json(meta_path)
   os.makedirs(out_dir, exist_ok=True)
+  if shard is not None:
+    return _generate_shard(spec, out_dir, workers, progress,
+                           compilation_cache, shard)
   with _exclusive(out_dir):
     if os.path.exists(meta_path):  # finished before we took the lock
       return mpm_io.read_json(meta_path)
     return _generate(spec, out_dir, workers, progress, compilation_cache)
+
+
+def _write_spec_once(spec: DatasetSpec, parts_dir: str) -> None:
+  """Writes ``parts/spec.json`` unless there is one; with several shards
+  starting at once the first writer wins (a hard link is atomic and fails
+  if the name exists) and the others check that theirs is the same."""
+  path = os.path.join(parts_dir, _SPEC_FILE)
+  if not os.path.exists(path):
+    tmp = mpm_io.temp_path(path)
+    mpm_io.write_text(tmp, json.dumps(dataclasses.asdict(spec), indent=2))
+    try:
+      os.link(tmp, path)
+    except FileExistsError:
+      pass
+    finally:
+      os.remove(tmp)
+  check_target(spec, os.path.dirname(parts_dir))
+
+
+def _simulate_all(todo, parts_dir, workers, compilation_cache, on_done):
+  """Simulates the planned scenes ``todo`` into parts, in this process or
+  ``workers`` worker processes, calling ``on_done(wall)`` after each."""
+  if workers <= 1 or len(todo) <= 1:
+    for it in todo:
+      on_done(_simulate_part(it, parts_dir))
+    return
+  context = multiprocessing.get_context("spawn")  # JAX is not fork-safe
+  with concurrent.futures.ProcessPoolExecutor(
+      workers, mp_context=context, initializer=_init_worker,
+      initargs=(compilation_cache, os.getpid())) as pool:
+    futures = [pool.submit(_simulate_part, it, parts_dir) for it in todo]
+    for future in concurrent.futures.as_completed(futures):
+      on_done(future.result())
 
 
 def _generate(spec, out_dir, workers, progress, compilation_cache) -> dict:
@@ -328,33 +432,85 @@ def _generate(spec, out_dir, workers, progress, compilation_cache) -> dict:
   os.makedirs(parts_dir, exist_ok=True)
   _remove_stale_temps(parts_dir)
   items = plan(spec)
+  _simulate_items(spec, items, parts_dir, workers, progress,
+                  compilation_cache)
+  return assemble(spec, out_dir, items)
+
+
+def _simulate_items(spec, items, parts_dir, workers, progress,
+                    compilation_cache) -> None:
   # Checked before spec.json is written: parts of another config (say, from
   # a version that kept no spec.json) are refused, not adopted.
   todo = [it for it in items if not _part_done(it, parts_dir)]
-  spec_path = os.path.join(parts_dir, _SPEC_FILE)
-  if not os.path.exists(spec_path):
-    mpm_io.write_json(spec_path, dataclasses.asdict(spec))
+  _write_spec_once(spec, parts_dir)
   done = len(items) - len(todo)
   if progress is not None:
     progress(done, len(items), 0.0)
-  if workers <= 1 or len(todo) <= 1:
-    for it in todo:
-      wall = _simulate_part(it, parts_dir)
-      done += 1
-      if progress is not None:
-        progress(done, len(items), wall)
-  else:
-    context = multiprocessing.get_context("spawn")  # JAX is not fork-safe
-    with concurrent.futures.ProcessPoolExecutor(
-        workers, mp_context=context, initializer=_init_worker,
-        initargs=(compilation_cache, os.getpid())) as pool:
-      futures = [pool.submit(_simulate_part, it, parts_dir) for it in todo]
-      for future in concurrent.futures.as_completed(futures):
-        wall = future.result()
-        done += 1
-        if progress is not None:
-          progress(done, len(items), wall)
-  return assemble(spec, out_dir, items)
+
+  def on_done(wall):
+    nonlocal done
+    done += 1
+    if progress is not None:
+      progress(done, len(items), wall)
+
+  _simulate_all(todo, parts_dir, workers, compilation_cache, on_done)
+
+
+def _generate_shard(spec, out_dir, workers, progress, compilation_cache,
+                    shard: Shard) -> dict:
+  # Shards share the directory (a shared lock: an unsharded generator or an
+  # assembly waits for all of them) and each holds its own share.
+  with _locked(out_dir, f"{out_dir}: a generator that is not sharded (or "
+               "an assembly) is running on this directory; wait for it and "
+               "rerun", shared=True):
+    parts_dir = os.path.join(out_dir, "parts")
+    os.makedirs(parts_dir, exist_ok=True)
+    lock = os.path.join(parts_dir,
+                        f".shard-{shard.index}-of-{shard.count}.lock")
+    with _locked(lock, f"{out_dir}: shard {shard} is already being "
+                 "generated by another process; wait for it (or kill it) "
+                 "and rerun"):
+      _remove_stale_temps(parts_dir)
+      items = shard.take(plan(spec))
+      _simulate_items(spec, items, parts_dir, workers, progress,
+                      compilation_cache)
+  return {"shard": str(shard), "parts": len(items)}
+
+
+def assemble_parts(spec: DatasetSpec, out_dir: str) -> dict:
+  """Assembles the parts that shards (``generate(..., shard=...)``) wrote
+  into the dataset, as an unsharded run would have.
+
+  Returns:
+    The metadata written (or found, if the dataset is complete).
+
+  Raises:
+    InputError: parts are missing (naming how many and the first ones), or
+      ``out_dir`` holds a dataset or parts of another spec.
+    GeneratorBusyError: a generator is still running on ``out_dir``.
+  """
+  check_target(spec, out_dir)
+  meta_path = os.path.join(out_dir, "metadata.json")
+  if os.path.exists(meta_path):
+    return mpm_io.read_json(meta_path)
+  parts_dir = os.path.join(out_dir, "parts")
+  if not os.path.isdir(parts_dir):
+    raise scene_lib.InputError(
+        f"--assemble: {out_dir} holds no parts; generate them first (with "
+        "--shard=i/N for each i)")
+  with _locked(out_dir, f"{out_dir}: a generator is still running on this "
+               "directory; wait for every shard to finish, then assemble"):
+    if os.path.exists(meta_path):
+      return mpm_io.read_json(meta_path)
+    items = plan(spec)
+    missing = [it.part_name for it in items
+               if not _part_done(it, parts_dir)]
+    if missing:
+      raise scene_lib.InputError(
+          f"--assemble: {len(missing)} of {len(items)} parts are missing in "
+          f"{parts_dir} (first: {', '.join(missing[:3])}); run the shards "
+          "that hold them (or rerun any shard: finished parts are kept)")
+    return assemble(spec, out_dir, items)
 
 
 def _read_part(parts_dir: str, item: PlannedScene) -> mpm_io.Trajectory:

@@ -22,6 +22,7 @@ load this one.
 import dataclasses
 import json
 import os
+import socket
 from typing import Iterable, Iterator, Sequence
 
 import h5py
@@ -36,6 +37,24 @@ DEFAULT_CONNECTIVITY_RADIUS = 0.015
 
 class FormatError(ValueError):
   """A trajectory file is missing, corrupt or not in this format."""
+
+
+def temp_path(path: str) -> str:
+  """A temporary name beside ``path`` for one writer: ``<path>.tmp-<host>-
+  <pid>``. Processes on different hosts sharing a filesystem may have the
+  same pid; the host name keeps their temporary files apart."""
+  host = socket.gethostname().replace("/", "_") or "host"
+  return f"{path}.tmp-{host}-{os.getpid()}"
+
+
+def temp_writer(tmp: str) -> tuple[str | None, int | None]:
+  """(host, pid) of a ``temp_path`` name; host None for the older
+  ``<path>.tmp-<pid>`` names, pid None if it is not one of ours."""
+  tail = tmp.rsplit(".tmp-", 1)[-1]
+  host, _, pid = tail.rpartition("-")
+  if not pid.isdigit():
+    return None, None
+  return (host or None), int(pid)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,7 +155,7 @@ def write_split(path: str, trajectories: Iterable[Trajectory], *, stats: dict,
   Returns:
     Each trajectory's ``wall_time_s``, in order.
   """
-  tmp = f"{path}.tmp-{os.getpid()}"
+  tmp = temp_path(path)
   wall_times = []
   try:
     with h5py.File(tmp, "w") as f:
@@ -163,7 +182,7 @@ def write_split(path: str, trajectories: Iterable[Trajectory], *, stats: dict,
 
 def write_text(path: str, text: str) -> None:
   """Writes ``text`` to ``path`` atomically (a temporary file, renamed)."""
-  tmp = f"{path}.tmp-{os.getpid()}"
+  tmp = temp_path(path)
   with open(tmp, "w") as f:
     f.write(text)
   os.replace(tmp, path)

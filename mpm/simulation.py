@@ -8,6 +8,7 @@ T frames, B scenes in a batch.
 
 import dataclasses
 import math
+import os
 import time
 from typing import Callable, Sequence
 
@@ -258,6 +259,19 @@ def pad_setup(s: Setup, n_particles: int, n_nodes: int) -> Setup:
   return dataclasses.replace(s, state=state, field=field)
 
 
+def _stacked(setups: Sequence[Setup], batched: bool):
+  """(state, params, field) of the setups padded to one size, stacked on a
+  leading batch axis if ``batched`` (else the one setup's)."""
+  n = max(s.state.x.shape[0] for s in setups)
+  nb = max(s.field.index.shape[0] for s in setups)
+  padded = [pad_setup(s, n, nb) for s in setups]
+  if not batched:
+    return padded[0].state, padded[0].params, padded[0].field
+  stack = lambda *a: jnp.stack(a)
+  return tuple(jax.tree.map(stack, *[getattr(s, k) for s in padded])
+               for k in ("state", "params", "field"))
+
+
 def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
                     progress: Callable[[int], None] | None = None
                     ) -> list[SimulationResult]:
@@ -285,17 +299,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
           "simulate_setups: scenes in one batch need the same grid "
           "(domain, dx), substeps per frame, num_frames and frame_dt; "
           f"{s.scene.name!r} differs from {first.scene.name!r}")
-  n = max(s.state.x.shape[0] for s in setups)
-  nb = max(s.field.index.shape[0] for s in setups)
-  padded = [pad_setup(s, n, nb) for s in setups]
   batched = len(setups) > 1
-  if batched:
-    stack = lambda *a: jnp.stack(a)
-    state = jax.tree.map(stack, *[s.state for s in padded])
-    params = jax.tree.map(stack, *[s.params for s in padded])
-    field = jax.tree.map(stack, *[s.field for s in padded])
-  else:
-    state, params, field = padded[0].state, padded[0].params, padded[0].field
+  state, params, field = _stacked(setups, batched)
   n_chunks, frames = chunking(first.scene.num_frames, chunk_frames)
   fn = _batched_rollout if batched else _rollout
   static = (first.spec, frames, first.n_substeps)
@@ -357,3 +362,103 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene],
                                              jnp.float32)))
             for s in setups]
   return simulate_setups(setups, **kwargs)
+
+
+# ------------------------------------------------------- batch sizing ---
+
+
+@dataclasses.dataclass(frozen=True)
+class BatchSizing:
+  """How many scenes like one ``simulate_batch`` call should take.
+
+  Attributes:
+    batch: scenes per call (>= 1).
+    per_scene_bytes: device memory each scene adds to the batched program
+      (XLA's memory analysis at 1 and 2 scenes: arguments, outputs and
+      temporaries).
+    fixed_bytes: what the program needs whatever the batch.
+    available_bytes: the device memory counted on (None: not known).
+    source: where ``available_bytes`` came from, or the fallback taken.
+  """
+  batch: int
+  per_scene_bytes: int
+  fixed_bytes: int
+  available_bytes: int | None
+  source: str
+
+
+def device_memory_bytes(device=None) -> int | None:
+  """Bytes a new program may use on ``device`` (default: the first):
+  ``memory_stats()``'s ``bytes_limit`` less ``bytes_in_use``; None where
+  the device keeps no such statistics (the CPU)."""
+  device = device or jax.devices()[0]
+  try:
+    stats = device.memory_stats()
+  except (AttributeError, NotImplementedError, RuntimeError):
+    stats = None
+  if not stats or "bytes_limit" not in stats:
+    return None
+  return int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
+
+
+def program_bytes(setups: Sequence[Setup], chunk_frames: int = 50) -> int:
+  """Device bytes of the batched chunk program ``simulate_setups`` runs
+  for these setups (compiled, not run; XLA's memory analysis)."""
+  state, params, field = _stacked(setups, batched=True)
+  first = setups[0]
+  _, frames = chunking(first.scene.num_frames, chunk_frames)
+  compiled, _ = _compile(_batched_rollout, state, params, field, first.spec,
+                         frames, first.n_substeps)
+  m = compiled.memory_analysis()
+  if m is None:
+    raise NotImplementedError("no memory analysis on this backend")
+  return int(m.argument_size_in_bytes + m.output_size_in_bytes +
+             m.temp_size_in_bytes - m.alias_size_in_bytes)
+
+
+def batch_size_for(scene: scene_lib.Scene, *, chunk_frames: int = 50,
+                   device=None, fraction: float = 0.8, cpu_batch: int = 8,
+                   max_batch: int = 4096) -> BatchSizing:
+  """Scenes like ``scene`` per ``simulate_batch`` call that fill a device.
+
+  The per-scene footprint is measured from the compiled batched program at
+  1 and 2 scenes (two compilations, seconds). On an accelerator the batch
+  is ``fraction`` of the free memory (``device_memory_bytes``) over it.
+  Where the device reports no memory (the CPU) the batch is ``cpu_batch``
+  (a batch does not fill the CPU's memory but its cores, and more scenes
+  per call gain little there: docs/scaling.md), still capped by the
+  host's free memory.
+
+  Args:
+    scene: a representative scene (the largest of those to batch).
+    chunk_frames: as ``simulate_setups``'s.
+    device: default the first device.
+    fraction: share of the free memory to fill (the rest: XLA's slack).
+    cpu_batch: the batch where memory statistics are missing.
+    max_batch: upper bound in any case.
+
+  Returns:
+    A :class:`BatchSizing`.
+  """
+  if not 0 < fraction <= 1:
+    raise scene_lib.InputError(f"fraction = {fraction}; allowed: (0, 1]")
+  s = setup(scene)
+  one, two = program_bytes([s], chunk_frames), program_bytes([s, s],
+                                                             chunk_frames)
+  per_scene = max(two - one, 1)
+  fixed = max(one - per_scene, 0)
+  available = device_memory_bytes(device)
+  source = "memory_stats: bytes_limit - bytes_in_use"
+  if available is None:
+    batch = cpu_batch
+    source = (f"fallback: {(device or jax.devices()[0]).platform} reports "
+              f"no memory_stats; cpu_batch = {cpu_batch}")
+    try:  # host memory still bounds it
+      host = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+      batch = min(batch, max(1, int((fraction * host - fixed) // per_scene)))
+    except (ValueError, OSError, AttributeError):
+      pass
+  else:
+    batch = int((fraction * available - fixed) // per_scene)
+  return BatchSizing(max(1, min(batch, max_batch)), per_scene, fixed,
+                     available, source)

@@ -1,6 +1,6 @@
 """Benchmarks of the MPM solver, the GNS, the dataset and inverse design.
 
-Run as ``python -m experiments.benchmarks --what=mpm,gns,dataset,design``
+Run as ``python -m experiments.benchmarks --what=mpm,gns,dataset,design,batch``
 (``__main__.py``: flags, commands). Each benchmark is one library call,
 ``<name>_benchmark.run_benchmark(out_dir, ...)``, that writes
 ``<name>_benchmark.json`` and ``.md`` to ``out_dir`` and returns the results.
@@ -24,6 +24,10 @@ form, and where the time goes by kind of operation (``op_profile``).
 dataset (``dataset_benchmark``): wall time to generate 20 paper trajectories
 with 2 and 1 worker processes, extrapolated to the paper's 1100, and windows
 and padded batches read per second from ``--read_data``.
+
+batch (``batch_benchmark``): particle-substeps per second of
+``mpm.simulate_batch`` against scenes per batch, and the batch
+``mpm.simulation.batch_size_for`` picks on this device.
 
 design (``design_benchmark``): the gradient of an objective w.r.t. an
 obstacle's x against the forward rollout, for MPM and GNS: time ratio and

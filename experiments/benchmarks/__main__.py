@@ -6,6 +6,7 @@
   python -m experiments.benchmarks --what=dataset --out=docs/benchmarks \\
       --read_data=data/small
   python -m experiments.benchmarks --what=design --out=docs/benchmarks
+  python -m experiments.benchmarks --what=batch --out=docs/benchmarks
   python -m experiments.benchmarks --what=mpm,gns --quick ...   # smoke test
 
 ``--what`` (comma-separated; default mpm,gns) picks the benchmarks; each
@@ -23,6 +24,7 @@ from absl import flags
 from absl import logging
 
 from experiments import runtime
+from experiments.benchmarks import batch_benchmark
 from experiments.benchmarks import dataset_benchmark
 from experiments.benchmarks import design_benchmark
 from experiments.benchmarks import gns_benchmark
@@ -30,7 +32,7 @@ from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import input_benchmark
 from experiments.benchmarks import mpm_benchmark
 
-BENCHMARKS = ("mpm", "gns", "dataset", "design", "input")
+BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch")
 
 _OUT = flags.DEFINE_string("out", "docs/benchmarks",
                            "Directory for the JSON and Markdown results.")
@@ -121,6 +123,8 @@ def main(argv):
           out, quick=quick, log=logging.info),
       "input": lambda: input_benchmark.run_benchmark(
           _READ_DATA.value, out, quick=quick),
+      "batch": lambda: batch_benchmark.run_benchmark(
+          out, quick=quick, log=logging.info),
   }
   for name in BENCHMARKS:
     if name in what:

@@ -34,8 +34,9 @@ def run(*args):
 # (name, module, argv, expected in the message). In argv, {d} is a fresh
 # directory holding: tiny.json (a valid tiny scene), stiff.json (the same
 # with E = 1e12 Pa), bad.json (an unknown obstacle shape), traj.h5 (a
-# 3-frame trajectory), a_file (a plain file), other/metadata.json (a finished
-# dataset of another config), parts/parts/spec.json (an unfinished one). No
+# 3-frame trajectory), a_file (a plain file), ds/train.h5 (what --data
+# needs), other/metadata.json (a finished dataset of another config),
+# parts/parts/spec.json (an unfinished one). No
 # row may create {d}/out, or anything else (item 9); every row answers in one
 # line with exit code 2 (item 10).
 ROWS = (
@@ -55,6 +56,17 @@ ROWS = (
     ("generate_no_train", "experiments.generate_dataset",
      [TEST, "--out={d}/out", "--config.dataset.num_train=0"],
      "dataset.num_train = 0; allowed: an integer >= 1"),
+    ("generate_malformed_shard", "experiments.generate_dataset",
+     [TEST, "--out={d}/out", "--shard=2/2"],
+     "--shard=2/2; allowed: i/N with integers N >= 1 and 0 <= i < N"),
+    ("generate_shard_not_a_fraction", "experiments.generate_dataset",
+     [TEST, "--out={d}/out", "--shard=half"], "--shard=half; allowed: i/N"),
+    ("generate_shard_and_assemble", "experiments.generate_dataset",
+     [TEST, "--out={d}/out", "--shard=0/2", "--assemble"],
+     "--shard=0/2 with --assemble; allowed: one of them"),
+    ("assemble_missing_parts", "experiments.generate_dataset",
+     [TEST, "--out={d}", "--assemble"],
+     "--assemble: 10 of 10 parts are missing in {d}/parts"),
     ("verify_missing", "experiments.generate_dataset",
      [TEST, "--out={d}/out", "--verify"],
      "--out={d}/out: no such directory"),
@@ -84,6 +96,47 @@ ROWS = (
     ("train_missing_data", "experiments.train",
      [SMALL, "--data={d}/data", "--workdir={d}/out"],
      "--data={d}/data: no such directory"),
+    # Training across processes: refused before anything starts.
+    ("train_process_id_out_of_range", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--coordinator=localhost:1",
+      "--num_processes=2", "--process_id=2"],
+     "--process_id=2; allowed: 0..1 for --num_processes=2"),
+    ("train_coordinator_malformed", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--coordinator=localhost",
+      "--num_processes=2", "--process_id=1"],
+     "--coordinator=localhost; allowed: host:port"),
+    ("train_coordinator_unresolvable", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out",
+      "--coordinator=no-such-host.invalid:12355", "--num_processes=2",
+      "--process_id=1"],
+     "cannot resolve host 'no-such-host.invalid'"),
+    ("train_coordinator_unreachable", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--coordinator=127.0.0.1:9",
+      "--num_processes=2", "--process_id=1", "--coordinator_wait_s=0.5"],
+     "--coordinator=127.0.0.1:9: nothing answers there after 0.5 s"),
+    ("train_coordinator_not_this_host", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out",
+      "--coordinator=192.0.2.1:12355", "--num_processes=2", "--process_id=0"],
+     "'192.0.2.1' is not an address of this host"),
+    ("train_processes_without_coordinator", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--num_processes=2",
+      "--process_id=0"], "--num_processes=2 needs --coordinator=host:port"),
+    ("train_batch_over_processes", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--coordinator=localhost:1",
+      "--num_processes=3", "--process_id=0"],
+     "config.train.batch_size = 2 with --num_processes=3; allowed: a "
+     "multiple of the process count"),
+    ("train_pushforward_over_processes", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--coordinator=localhost:1",
+      "--num_processes=2", "--process_id=0",
+      "--config.train.pushforward_steps=2",
+      "--config.train.pushforward_probability=0.5"],
+     "pushforward training runs on one process only"),
+    ("train_device_windows_over_processes", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out", "--coordinator=localhost:1",
+      "--num_processes=2", "--process_id=0",
+      "--config.train.device_windows=True"],
+     "on-device windows run on one process only"),
     ("simulate_missing_scene", "experiments.simulate",
      ["--scene={d}/missing.json", "--out={d}/out/traj.h5"],
      "--scene={d}/missing.json: no such file"),
@@ -157,6 +210,10 @@ class BadInputTest(parameterized.TestCase):
         np.zeros(1, np.int32), scene)])
     with open(os.path.join(d, "a_file"), "w") as f:
       f.write("not a directory")
+    # A directory that passes --data's check (the training rows fail later).
+    os.makedirs(os.path.join(d, "ds"))
+    with open(os.path.join(d, "ds", "train.h5"), "w") as f:
+      f.write("not read")
     os.makedirs(os.path.join(d, "other"))
     mpm_io.write_json(os.path.join(d, "other", "metadata.json"),
                       {"spec": dict(_TEST_SPEC, num_train=5)})

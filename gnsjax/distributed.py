@@ -1,0 +1,271 @@
+"""Training across processes and hosts: settings, checks and start-up.
+
+One process per host (or per accelerator), all started with the same
+command but their own ``process_id``; process 0 runs the coordinator at
+``coordinator`` (host:port). ``settings`` reads the flags, else the
+variables a launcher sets (SLURM_NTASKS / SLURM_PROCID, or
+GNSJAX_NUM_PROCESSES / GNSJAX_PROCESS_ID / GNSJAX_COORDINATOR);
+``check_reachable`` tests the address with a plain TCP connect (with a
+short timeout: ``jax.distributed.initialize`` would otherwise wait minutes
+on a wrong one); ``initialize`` starts JAX's distributed runtime (CPU
+collectives over gloo) and checks that every process agrees on the count.
+
+Docs: docs/scaling.md.
+"""
+
+import dataclasses
+import errno
+import os
+import socket
+import time
+from typing import Mapping, Sequence
+
+import jax
+import numpy as np
+
+from mpm import scene as mpm_scene
+
+InputError = mpm_scene.InputError
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+  """How this process takes part.
+
+  Attributes:
+    coordinator: "host:port" of process 0's coordinator (None alone).
+    num_processes: processes in the run (1: alone, no runtime started).
+    process_id: this process's rank, 0 <= process_id < num_processes.
+  """
+  coordinator: str | None = None
+  num_processes: int = 1
+  process_id: int = 0
+
+  @property
+  def multi(self) -> bool:
+    return self.num_processes > 1
+
+
+def _int(name: str, text: str) -> int:
+  try:
+    return int(text)
+  except ValueError:
+    raise InputError(f"{name}={text!r}; allowed: an integer") from None
+
+
+def settings(coordinator: str | None = None,
+             num_processes: int | None = None,
+             process_id: int | None = None,
+             environ: Mapping[str, str] | None = None) -> Settings:
+  """This process's settings from the flags (None: not given), else from
+  the environment (SLURM's, or GNSJAX_*).
+
+  Raises:
+    InputError: a value out of range, a flag without the others it needs,
+      or a flag that contradicts the launcher's variable.
+  """
+  env = os.environ if environ is None else environ
+  from_env = {}
+  for key, names in (("num_processes", ("GNSJAX_NUM_PROCESSES",
+                                        "SLURM_NTASKS")),
+                     ("process_id", ("GNSJAX_PROCESS_ID", "SLURM_PROCID"))):
+    for name in names:
+      if env.get(name):
+        from_env[key] = (name, _int(name, env[name]))
+        break
+  # A flag that disagrees with the launcher means a mistyped command line:
+  # the processes would wait for each other forever.
+  for key, flag in (("num_processes", num_processes),
+                    ("process_id", process_id)):
+    if flag is not None and key in from_env and from_env[key][1] != flag:
+      name, value = from_env[key]
+      raise InputError(f"--{key}={flag} but {name}={value}; allowed: the "
+                       "same value (or leave the flag out)")
+  if num_processes is None and "num_processes" in from_env:
+    num_processes = from_env["num_processes"][1]
+  if process_id is None and "process_id" in from_env:
+    process_id = from_env["process_id"][1]
+  if coordinator is None:
+    coordinator = env.get("GNSJAX_COORDINATOR") or None
+  if num_processes is None:
+    if coordinator is not None or process_id is not None:
+      given = "--coordinator" if coordinator is not None else "--process_id"
+      raise InputError(f"{given} needs --num_processes (the number of "
+                       "processes in the run); allowed: all three of "
+                       "--coordinator, --num_processes, --process_id, or "
+                       "none")
+    return Settings()
+  if num_processes < 1:
+    raise InputError(f"--num_processes={num_processes}; allowed: >= 1")
+  if num_processes == 1:
+    if process_id not in (None, 0):
+      raise InputError(f"--process_id={process_id}; allowed: 0 for "
+                       "--num_processes=1")
+    return Settings()
+  if process_id is None:
+    raise InputError(f"--num_processes={num_processes} needs --process_id; "
+                     f"allowed: 0..{num_processes - 1}")
+  if not 0 <= process_id < num_processes:
+    raise InputError(f"--process_id={process_id}; allowed: "
+                     f"0..{num_processes - 1} for --num_processes="
+                     f"{num_processes}")
+  if coordinator is None:
+    raise InputError(f"--num_processes={num_processes} needs "
+                     "--coordinator=host:port (process 0's host and a free "
+                     "port), or GNSJAX_COORDINATOR")
+  parse_address(coordinator)
+  return Settings(coordinator, num_processes, process_id)
+
+
+def parse_address(text: str) -> tuple[str, int]:
+  """``"host:port"`` (``"[v6]:port"``) -> (host, port); InputError else."""
+  host, sep, port = text.rpartition(":")
+  host = host.strip("[]")
+  if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+    raise InputError(f"--coordinator={text}; allowed: host:port with a port "
+                     "1..65535 (e.g. node001:12355)")
+  return host, int(port)
+
+
+def check_reachable(s: Settings, wait_s: float = 60.0,
+                    connect_timeout_s: float = 2.0) -> None:
+  """Fails fast on a coordinator address that cannot work.
+
+  Process 0 will listen there, so it checks that the host is one of its
+  own addresses and the port is free; the others connect to it (TCP, a
+  ``connect_timeout_s`` timeout) until it answers or ``wait_s`` pass (the
+  processes need not start at the same moment).
+
+  Raises:
+    InputError: naming the address and what is wrong with it.
+  """
+  if not s.multi:
+    return
+  host, port = parse_address(s.coordinator)
+  flag = f"--coordinator={s.coordinator}"
+  try:
+    infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+  except socket.gaierror as e:
+    raise InputError(f"{flag}: cannot resolve host {host!r} ({e.strerror}); "
+                     "allowed: process 0's host name or address") from None
+  family, _, _, _, address = infos[0]
+  if s.process_id == 0:
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+      try:
+        sock.bind(address)
+      except OSError as e:
+        why = {errno.EADDRINUSE: "the port is in use",
+               errno.EADDRNOTAVAIL: f"{host!r} is not an address of this "
+                                    "host, but process 0 runs the "
+                                    "coordinator"}.get(e.errno, e.strerror)
+        raise InputError(f"{flag}: {why}; allowed: this host's name or "
+                         "address and a free port") from None
+    return
+  deadline = time.monotonic() + wait_s
+  while True:
+    try:
+      with socket.create_connection(address[:2],
+                                    timeout=connect_timeout_s):
+        return
+    except OSError as e:
+      why = e.strerror or type(e).__name__
+    if time.monotonic() >= deadline:
+      raise InputError(
+          f"{flag}: nothing answers there after {wait_s:g} s ({why}); "
+          "allowed: the host:port where process 0 (started with "
+          "--process_id=0) runs")
+    time.sleep(min(1.0, connect_timeout_s))
+
+
+def initialize(s: Settings, timeout_s: int = 300) -> None:
+  """Starts JAX's distributed runtime (nothing alone) and checks that it
+  sees ``s.num_processes`` processes with this one at ``s.process_id``.
+
+  Must run before JAX touches a device. On CPU the collectives go over
+  gloo.
+
+  Raises:
+    InputError: the processes did not all connect within ``timeout_s``
+      (a process missing, or started with another --num_processes), or the
+      runtime's count or rank differ from the flags.
+  """
+  if not s.multi:
+    return
+  from jax._src import xla_bridge  # pylint: disable=g-import-not-at-top
+  if xla_bridge.backends_are_initialized():
+    # A bug, not bad input: something (e.g. importing jax_md, which
+    # gnsjax.graph does) touched a device first.
+    raise RuntimeError("distributed.initialize: JAX's backend is already "
+                       "initialised; call it before importing gnsjax.train")
+  jax.config.update("jax_cpu_collectives_implementation", "gloo")
+  try:
+    jax.distributed.initialize(s.coordinator, s.num_processes, s.process_id,
+                               initialization_timeout=timeout_s)
+  except Exception as e:  # pylint: disable=broad-except
+    # JAX raises its runtime's error types; the cause is in the text.
+    first = str(e).strip().splitlines()[0] if str(e).strip() else repr(e)
+    raise InputError(
+        f"--coordinator={s.coordinator}: the {s.num_processes} processes "
+        f"did not all connect within {timeout_s} s ({first[:200]}); allowed: "
+        "every process started, all with the same --num_processes and "
+        "--coordinator and distinct --process_id") from e
+  if (jax.process_count(), jax.process_index()) != (s.num_processes,
+                                                    s.process_id):
+    raise InputError(
+        f"--num_processes={s.num_processes} --process_id={s.process_id}, "
+        f"but the runtime has {jax.process_count()} processes with this one "
+        f"at {jax.process_index()}; allowed: the same --num_processes in "
+        "every process")
+  high, low = agree_max((s.num_processes, -s.num_processes))
+  if (high, -low) != (s.num_processes, s.num_processes):
+    raise InputError(
+        f"--num_processes={s.num_processes}, but the processes were started "
+        f"with {-low} to {high}; allowed: the same --num_processes in every "
+        "process")
+
+
+def check_supported(config, num_processes: int) -> None:
+  """Refuses a training config (``experiments/configs``) that does not
+  work split over ``num_processes`` processes.
+
+  Raises:
+    InputError: the batch does not split evenly, or the config asks for
+      pushforward training or on-device windows, which run on one process
+      only (they build graphs or gather windows from the whole batch).
+  """
+  tcfg = config.get("train")
+  if tcfg is None or "batch_size" not in tcfg:
+    return  # not a training config: check_config names what is missing
+  if tcfg.batch_size % num_processes:
+    raise InputError(f"config.train.batch_size = {tcfg.batch_size} with "
+                     f"--num_processes={num_processes}; allowed: a multiple "
+                     "of the process count")
+  if num_processes == 1:
+    return
+  if tcfg.pushforward_probability > 0 and tcfg.pushforward_steps > 0:
+    raise InputError(
+        "config.train.pushforward_probability = "
+        f"{tcfg.pushforward_probability} with --num_processes="
+        f"{num_processes}: pushforward training runs on one process only; "
+        "allowed: pushforward_probability = 0 (or one process)")
+  if tcfg.device_windows:
+    raise InputError(
+        f"config.train.device_windows = True with --num_processes="
+        f"{num_processes}: on-device windows run on one process only; "
+        "allowed: device_windows = False (or one process)")
+
+
+def agree_max(values: Sequence[int]) -> tuple[int, ...]:
+  """The elementwise maximum of ``values`` over all processes (int32; the
+  values themselves in one process). Every process must call it."""
+  if jax.process_count() == 1:
+    return tuple(int(v) for v in values)
+  # pylint: disable-next=g-import-not-at-top
+  from jax.experimental import multihost_utils
+  gathered = multihost_utils.process_allgather(np.asarray(values, np.int32))
+  return tuple(int(v) for v in np.max(np.asarray(gathered), axis=0))
+
+
+def agree_any(flag: bool) -> bool:
+  """Whether ``flag`` holds in any process."""
+  return bool(agree_max((int(flag),))[0])

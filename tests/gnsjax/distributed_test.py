@@ -1,0 +1,240 @@
+"""Tests for `gnsjax.distributed` and training across processes.
+
+Two processes on localhost (CPU collectives over gloo) train with the same
+global batch as one process, and must give its losses.
+"""
+
+import csv
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+from absl.testing import absltest
+from absl.testing import parameterized
+import numpy as np
+import pytest
+
+from gnsjax import distributed
+from gnsjax import train
+from tests.gnsjax import fixtures
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))
+CACHE = os.path.join(ROOT, ".jax_cache")
+
+
+def _losses(workdir):
+  with open(os.path.join(workdir, "metrics.csv"), newline="") as f:
+    return [(int(r["step"]), float(r["loss"])) for r in csv.DictReader(f)]
+
+
+def _free_port() -> int:
+  with socket.socket() as s:
+    s.bind(("127.0.0.1", 0))
+    return s.getsockname()[1]
+
+
+def _train_argv(data: str, workdir: str, num_steps: int) -> list[str]:
+  """experiments.train with the test config, made ``fixtures.tiny_config``
+  on the command line."""
+  spec = fixtures.SPEC
+  return [sys.executable, "-m", "experiments.train",
+          "--config=experiments/configs/test.py", f"--data={data}",
+          f"--workdir={workdir}",
+          f"--config.dataset.num_train={spec.num_train}",
+          f"--config.dataset.num_test={spec.num_test}",
+          f"--config.dataset.num_frames={spec.num_frames}",
+          f"--config.dataset.seed={spec.seed}",
+          f"--config.dataset.spacing={spec.spacing}",
+          f"--config.dataset.connectivity_radius={spec.connectivity_radius}",
+          "--config.model.num_message_passing_steps=1",
+          "--config.train.node_bucket=32", "--config.eval.every_steps=0",
+          f"--config.train.num_steps={num_steps}", "--config.log_every=1",
+          "--config.checkpoint.every_steps=4"]
+
+
+def _start_two(data, workdir, num_steps, port, log_dir):
+  env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
+             GNSJAX_CACHE_DIR=CACHE)
+  procs = []
+  for i in range(2):
+    log = open(os.path.join(log_dir, f"process{i}.log"), "a")
+    procs.append(subprocess.Popen(
+        _train_argv(data, workdir, num_steps) + [
+            f"--coordinator=127.0.0.1:{port}", "--num_processes=2",
+            f"--process_id={i}"],
+        env=env, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT))
+    log.close()
+  return procs
+
+
+def _tail(log_dir):
+  return "\n".join(open(os.path.join(log_dir, f"process{i}.log")).read()[
+      -2000:] for i in range(2))
+
+
+def _reference(data, workdir, num_steps):
+  """The same run in one process (this one)."""
+  config = fixtures.tiny_config(num_steps=num_steps)
+  config.log_every = 1
+  config.checkpoint.every_steps = 4
+  train.train_and_evaluate(config, data, workdir)
+  return _losses(workdir)
+
+
+class TwoProcessTrainingTest(absltest.TestCase):
+
+  def setUp(self):
+    super().setUp()
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    self.dir = tmp.name
+    self.data = fixtures.tiny_dataset()
+
+  def assert_losses_equal(self, got, want):
+    self.assertEqual([s for s, _ in got], [s for s, _ in want])
+    np.testing.assert_allclose([l for _, l in got], [l for _, l in want],
+                               rtol=1e-6)
+
+  def test_two_processes_match_one(self):
+    steps = 2
+    workdir = os.path.join(self.dir, "two")
+    procs = _start_two(self.data, workdir, steps, _free_port(), self.dir)
+    want = _reference(self.data, os.path.join(self.dir, "one"), steps)
+    codes = [p.wait(timeout=600) for p in procs]
+    self.assertEqual(codes, [0, 0], _tail(self.dir))
+    self.assert_losses_equal(_losses(workdir), want)
+    # One log, one checkpoint (written once, by both processes' orbax).
+    self.assertEqual(os.listdir(os.path.join(workdir, "checkpoints")), ["2"])
+    self.assertCountEqual(
+        os.listdir(workdir),
+        ["checkpoints", "config.json", "metrics.csv", "stats.json",
+         "tensorboard"])
+
+  @pytest.mark.slow
+  def test_kill_9_of_one_process_then_restart_of_both_resumes_exactly(self):
+    steps = 12
+    want = _reference(self.data, os.path.join(self.dir, "one"), steps)
+    workdir = os.path.join(self.dir, "two")
+    procs = _start_two(self.data, workdir, steps, _free_port(), self.dir)
+    ckpts = os.path.join(workdir, "checkpoints")
+    deadline = time.time() + 600
+    while time.time() < deadline and procs[1].poll() is None:
+      if os.path.isdir(ckpts) and any(d.isdigit() and int(d) >= 4
+                                      for d in os.listdir(ckpts)):
+        break
+      time.sleep(0.1)
+    procs[1].send_signal(signal.SIGKILL)
+    procs[1].wait()
+    # Its partner waits in a collective for the dead one; a launcher ends
+    # the whole job, as this does.
+    try:
+      procs[0].wait(timeout=10)
+    except subprocess.TimeoutExpired:
+      procs[0].send_signal(signal.SIGKILL)
+      procs[0].wait()
+    restart_from = max(int(d) for d in os.listdir(ckpts) if d.isdigit())
+    self.assertLess(restart_from, steps, "finished before the kill")
+    procs = _start_two(self.data, workdir, steps, _free_port(), self.dir)
+    codes = [p.wait(timeout=600) for p in procs]
+    self.assertEqual(codes, [0, 0], _tail(self.dir))
+    self.assert_losses_equal(_losses(workdir), want)  # no step twice
+
+
+class SettingsTest(parameterized.TestCase):
+
+  def test_alone_by_default(self):
+    self.assertEqual(distributed.settings(environ={}), distributed.Settings())
+    self.assertFalse(distributed.settings(environ={}).multi)
+
+  def test_flags_and_environment(self):
+    s = distributed.settings("h:1", 2, 1, environ={})
+    self.assertEqual(s, distributed.Settings("h:1", 2, 1))
+    slurm = {"SLURM_NTASKS": "4", "SLURM_PROCID": "3",
+             "GNSJAX_COORDINATOR": "node1:12355"}
+    self.assertEqual(distributed.settings(environ=slurm),
+                     distributed.Settings("node1:12355", 4, 3))
+    # The flag may repeat what the launcher says.
+    self.assertEqual(distributed.settings("n:2", 4, environ=slurm),
+                     distributed.Settings("n:2", 4, 3))
+
+  @parameterized.named_parameters(
+      ("id_out_of_range", ("h:1", 2, 2), {},
+       "--process_id=2; allowed: 0..1 for --num_processes=2"),
+      ("negative_id", ("h:1", 2, -1), {}, "--process_id=-1; allowed: 0..1"),
+      ("no_id", ("h:1", 2, None), {}, "needs --process_id"),
+      ("no_coordinator", (None, 2, 0), {}, "needs --coordinator=host:port"),
+      ("no_count", ("h:1", None, 0), {}, "--coordinator needs --num_processes"),
+      ("zero_processes", ("h:1", 0, 0), {}, "--num_processes=0; allowed: >= 1"),
+      ("malformed_address", ("h", 2, 0), {}, "--coordinator=h; allowed: "
+       "host:port"),
+      ("port_out_of_range", ("h:70000", 2, 0), {}, "a port 1..65535"),
+      ("count_against_slurm", ("h:1", 2, 0), {"SLURM_NTASKS": "4"},
+       "--num_processes=2 but SLURM_NTASKS=4; allowed: the same value"),
+      ("rank_against_slurm", ("h:1", 4, 0), {"SLURM_NTASKS": "4",
+                                             "SLURM_PROCID": "1"},
+       "--process_id=0 but SLURM_PROCID=1"),
+      ("bad_variable", (None, None, None), {"GNSJAX_NUM_PROCESSES": "two"},
+       "GNSJAX_NUM_PROCESSES='two'; allowed: an integer"),
+  )
+  def test_refused(self, args, environ, message):
+    with self.assertRaises(distributed.InputError) as e:
+      distributed.settings(*args, environ=environ)
+    self.assertIn(message, str(e.exception))
+
+  def test_unresolvable_coordinator(self):
+    s = distributed.Settings("no-such-host.invalid:1234", 2, 1)
+    with self.assertRaisesRegex(distributed.InputError,
+                                "cannot resolve host 'no-such-host.invalid'"):
+      distributed.check_reachable(s)
+
+  def test_nothing_listening_fails_after_the_wait(self):
+    s = distributed.Settings(f"127.0.0.1:{_free_port()}", 2, 1)
+    start = time.monotonic()
+    with self.assertRaisesRegex(distributed.InputError,
+                                "nothing answers there after 0.3 s"):
+      distributed.check_reachable(s, wait_s=0.3, connect_timeout_s=0.1)
+    self.assertLess(time.monotonic() - start, 5)
+
+  def test_a_listening_coordinator_is_reachable(self):
+    with socket.socket() as server:
+      server.bind(("127.0.0.1", 0))
+      server.listen()
+      port = server.getsockname()[1]
+      distributed.check_reachable(
+          distributed.Settings(f"127.0.0.1:{port}", 2, 1), wait_s=1)
+      # Process 0 must listen there itself: a taken port is refused.
+      with self.assertRaisesRegex(distributed.InputError,
+                                  "the port is in use"):
+        distributed.check_reachable(
+            distributed.Settings(f"127.0.0.1:{port}", 2, 0))
+
+  def test_process_0_needs_an_address_of_its_host(self):
+    s = distributed.Settings("192.0.2.1:12355", 2, 0)  # TEST-NET-1
+    with self.assertRaisesRegex(distributed.InputError,
+                                "not an address of this host"):
+      distributed.check_reachable(s)
+
+  def test_unsupported_configs_are_refused(self):
+    config = fixtures.tiny_config(batch_size=2)
+    distributed.check_supported(config, 2)
+    with self.assertRaisesRegex(distributed.InputError,
+                                "batch_size = 2 with --num_processes=3"):
+      distributed.check_supported(config, 3)
+    config = fixtures.tiny_config(pushforward_steps=1,
+                                  pushforward_probability=0.5)
+    distributed.check_supported(config, 1)
+    with self.assertRaisesRegex(distributed.InputError,
+                                "pushforward training runs on one process"):
+      distributed.check_supported(config, 2)
+    config = fixtures.tiny_config(device_windows=True)
+    with self.assertRaisesRegex(distributed.InputError,
+                                "on-device windows run on one process"):
+      distributed.check_supported(config, 2)
+
+
+if __name__ == "__main__":
+  absltest.main()
