@@ -25,7 +25,7 @@ Objective = Callable[[jax.Array], jax.Array]
 
 class Driver(Protocol):
   """A simulator as a function of the placement, run on the host."""
-  placement: placement_lib.Placement
+  placement: placement_lib.AnyPlacement
 
   def rollout(self, params: Params) -> np.ndarray:
     ...
@@ -80,14 +80,17 @@ def optimise(simulation: Driver, objective: Objective, params: Params, *,
 
 def plain(params: Params, prefix: str) -> dict[str, Any]:
   """Host floats of a placement for records: ``x`` as ``{prefix}x``, the
-  size as ``{prefix}size0`` and ``{prefix}size1``."""
+  size as ``{prefix}size0`` and ``{prefix}size1`` (arrays flattened in
+  row-major order: a ``MultiPlacement``'s x [2] as x0, x1, its size [2, 2]
+  as size0..size3)."""
   out = {}
   for k, v in params.items():
     v = np.asarray(v, np.float64)
     if v.ndim == 0:
       out[prefix + k] = float(v)
     else:
-      out.update({f"{prefix}{k}{i}": float(a) for i, a in enumerate(v)})
+      out.update({f"{prefix}{k}{i}": float(a)
+                  for i, a in enumerate(v.ravel())})
   return out
 
 
