@@ -62,7 +62,7 @@ def step_scale(placement: placement_lib.AnyPlacement,
   return out
 
 
-def _adam_trace(history: list[dict], placement, start: float) -> list[dict]:
+def _adam_trace(history: list[dict]) -> list[dict]:
   """Adam's records as a trace: the seconds at each iteration's end."""
   trace, best, elapsed = [], np.inf, 0.0
   for r in history:
@@ -130,7 +130,7 @@ def run_method(method: str, placement: placement_lib.AnyPlacement,
     # The design of each record, as a vector (records hold flat floats).
     for r in history:
       r["vector"] = placement.to_vector(_record_params(r, start)).tolist()
-    trace = _adam_trace(history, placement, 0.0)
+    trace = _adam_trace(history)
   else:
     fn = baselines.MPMBatchObjective(sim, objective.plain, batch_size)
     t = time.perf_counter()
