@@ -8,6 +8,18 @@ Optimises the obstacle's x in [0.5, 1.3] m, logs the objective per
 iteration, re-simulates the start and the optimum with the MPM, runs the
 brute-force MPM sweep over x for comparison, and plots the objective against
 x for GNS and MPM with the optimiser's path (see docs/inverse_design.md).
+
+Methods against baselines at equal budget, on the MPM:
+
+  python -m experiments.inverse_design --out=out/two \
+      --problem=two_obstacles --xs=0.9,1.1 --radii=0.04,0.04 \
+      --method=adam,adam_smoothed,cmaes,random,sweep --budget_s=120
+
+runs each method for the budget (after compiling it), judges every design
+by the MPM, re-simulates each method's best, and writes the best objective
+against wall time (objective_vs_time.png), trace.csv, summary.json and
+report.md. This mode runs when --problem=two_obstacles, a baseline
+(cmaes, random, sweep) or several methods are named, or a budget is given.
 """
 
 from absl import app
@@ -53,17 +65,45 @@ _STEPS = flags.DEFINE_integer("steps", 8, "Gradient evaluations.",
                               lower_bound=1)
 _LR = flags.DEFINE_float("learning_rate", 0.05, "Adam step size (m).",
                          lower_bound=0)
-_SWEEP = flags.DEFINE_integer("sweep_points", 9, "MPM sweep placements.",
+_SWEEP = flags.DEFINE_integer("sweep_points", 9, "MPM sweep placements "
+                              "(per parameter with --method=sweep).",
                               lower_bound=2)
 _OPTIMISE_SIZE = flags.DEFINE_bool(
     "optimise_size", False, "Optimise the obstacle's size too (Table 1 "
     "ranges).")
 
 
-_METHOD = flags.DEFINE_enum(
-    "method", "adam", ["adam", "adam_smoothed"],
-    "adam: plain gradients; adam_smoothed: gradients of the objective "
-    "smoothed at --sigma (MPM only; docs/inverse_design.md).")
+# gnsjax.design.comparison's names (imported late: it imports jax).
+_PROBLEMS = ("placement", "two_obstacles")
+_NOT_BUILT = ("baffles", "calibrate")
+_METHODS = ("adam", "adam_smoothed", "cmaes", "random", "sweep")
+_BASELINES = ("cmaes", "random", "sweep")
+_RADIUS_RANGE = sampler.SIZE_RANGES["semicircle"]["radius"]
+
+_PROBLEM = flags.DEFINE_enum(
+    "problem", "placement", list(_PROBLEMS + _NOT_BUILT),
+    "placement: one obstacle (x, and its size with --optimise_size); "
+    "two_obstacles: two semicircles, x and radius each (4 parameters, MPM "
+    "only). baffles and calibrate are not built yet (issue 14).")
+_METHOD = flags.DEFINE_list(
+    "method", ["adam"],
+    "One or more (comma-separated) of: adam (plain gradients), "
+    "adam_smoothed (gradients of the objective smoothed at --sigma; MPM "
+    "only), cmaes, random, sweep (baselines, batched MPM).")
+_BUDGET_S = flags.DEFINE_float(
+    "budget_s", None, "Wall-time budget (s) per method, after compilation.")
+_BUDGET_EVALS = flags.DEFINE_integer(
+    "budget_evals", None, "Evaluation budget per method (designs; for "
+    "Adam, gradient evaluations).")
+_XS = flags.DEFINE_list("xs", ["0.9", "1.1"], "two_obstacles: starting "
+                        "base positions (m), in [0.5, 1.3].")
+_RADII = flags.DEFINE_list("radii", ["0.04", "0.04"], "two_obstacles: "
+                           "starting radii (m), in [0.02, 0.05].")
+_BATCH = flags.DEFINE_integer("batch_size", 8, "Designs per batched MPM "
+                              "program of the baselines (CMA-ES's "
+                              "population).", lower_bound=2)
+_SEED = flags.DEFINE_integer("seed", 0, "Seed of the baselines and the "
+                             "smoothing.")
 _SIGMA = flags.DEFINE_float("sigma", 0.05, "Smoothing scale (m) of "
                             "adam_smoothed.", lower_bound=1e-6)
 _SAMPLES = flags.DEFINE_integer(
@@ -73,9 +113,90 @@ _ESTIMATOR = flags.DEFINE_enum("estimator", "score", ["score", "pathwise"],
                                "Estimator of the smoothed gradient.")
 
 
+def _comparing() -> bool:
+  """Whether the flags ask for the budgeted comparison (module docstring)."""
+  return (_PROBLEM.value != "placement" or len(_METHOD.value) > 1 or
+          any(m in _BASELINES for m in _METHOD.value) or
+          _BUDGET_S.value is not None or _BUDGET_EVALS.value is not None)
+
+
+def _floats(name: str, values: list[str], count: int) -> list[float]:
+  try:
+    out = [float(v) for v in values]
+  except ValueError:
+    out = []
+  if len(out) != count:
+    raise runtime.InputError(f"--{name}={','.join(values)}: allowed: "
+                             f"{count} comma-separated numbers (m)")
+  return out
+
+
+def _check_comparison() -> None:
+  """The budgeted comparison's flags: methods, budget, starting design."""
+  methods = _METHOD.value
+  unknown = [m for m in methods if m not in _METHODS]
+  if not methods or unknown or len(set(methods)) != len(methods):
+    raise runtime.InputError(f"--method={','.join(methods)}: allowed: one or "
+                             f"more distinct of {', '.join(_METHODS)}")
+  if _SIMULATOR.present and _SIMULATOR.value != "mpm":
+    raise runtime.InputError("the comparison of methods runs on the MPM; "
+                             "allowed: --simulator=mpm")
+  if _BUDGET_S.value is None and _BUDGET_EVALS.value is None:
+    raise runtime.InputError("the comparison of methods needs a budget; "
+                             "allowed: --budget_s > 0 and/or --budget_evals "
+                             ">= 1")
+  if _BUDGET_S.value is not None and not _BUDGET_S.value > 0:
+    raise runtime.InputError(f"--budget_s={_BUDGET_S.value:g}; allowed: > 0 "
+                             "(s)")
+  if _BUDGET_EVALS.value is not None and _BUDGET_EVALS.value < 1:
+    raise runtime.InputError(f"--budget_evals={_BUDGET_EVALS.value}; "
+                             "allowed: >= 1")
+  if _SAMPLES.value % 2:
+    raise runtime.InputError(f"--num_samples={_SAMPLES.value}; allowed: "
+                             "an even number >= 2 (antithetic pairs)")
+  if _PROBLEM.value == "two_obstacles":
+    lo, hi = _X_RANGE
+    xs = _floats("xs", _XS.value, 2)
+    radii = _floats("radii", _RADII.value, 2)
+    for k, x in enumerate(xs):
+      if not lo <= x <= hi:
+        raise runtime.InputError(f"--xs={','.join(_XS.value)}: obstacle {k} "
+                                 f"at x = {x:g}; allowed: [{lo:g}, {hi:g}] m")
+    rlo, rhi = _RADIUS_RANGE
+    for k, r in enumerate(radii):
+      if not rlo <= r <= rhi:
+        raise runtime.InputError(
+            f"--radii={','.join(_RADII.value)}: obstacle {k} of radius "
+            f"{r:g}; allowed: [{rlo:g}, {rhi:g}] m")
+    if abs(xs[1] - xs[0]) < radii[0] + radii[1]:
+      raise runtime.InputError(
+          f"--xs={','.join(_XS.value)} with --radii={','.join(_RADII.value)}"
+          f": the obstacles overlap; allowed: base centres at least "
+          f"{radii[0] + radii[1]:g} m apart")
+
+
 def _check_inputs() -> None:
   """Refuses bad flags before anything is created or compiled: the design
   range of x is one range, whether x comes from --x0 or --scene."""
+  if _PROBLEM.value in _NOT_BUILT:
+    raise runtime.InputError(f"--problem={_PROBLEM.value}: not built yet "
+                             "(issue 14); allowed: "
+                             f"{', '.join(_PROBLEMS)}")
+  if _comparing():
+    _check_comparison()
+    if _PROBLEM.value == "two_obstacles":
+      if _TEMPERATURE.value is not None and not _TEMPERATURE.value > 0:
+        raise runtime.InputError(f"--temperature={_TEMPERATURE.value:g}; "
+                                 "allowed: > 0 (m)")
+      runtime.writable("out", _OUT.value)
+      return
+    if _SCENE.value is not None:
+      raise runtime.InputError("--scene: the comparison of methods builds "
+                               "its scene; allowed: --shape, --size, --x0")
+  elif len(_METHOD.value) != 1 or _METHOD.value[0] not in (
+      "adam", "adam_smoothed"):
+    raise runtime.InputError(f"--method={','.join(_METHOD.value)}: allowed: "
+                             f"one or more of {', '.join(_METHODS)}")
   lo, hi = _X_RANGE
   if _SCENE.value is not None:
     scene = mpm.Scene.load(runtime.existing_file("scene", _SCENE.value))
@@ -111,7 +232,10 @@ def _check_inputs() -> None:
   if _TEMPERATURE.value is not None and not _TEMPERATURE.value > 0:
     raise runtime.InputError(f"--temperature={_TEMPERATURE.value:g}; "
                              "allowed: > 0 (m)")
-  if _METHOD.value == "adam_smoothed":
+  if _comparing():
+    runtime.writable("out", _OUT.value)
+    return
+  if _METHOD.value == ["adam_smoothed"]:
     if _SIMULATOR.value != "mpm":
       raise runtime.InputError("--method=adam_smoothed runs on the MPM; "
                                "allowed: --simulator=mpm")
@@ -131,6 +255,21 @@ def main(argv):
     raise app.UsageError(f"unexpected arguments: {argv[1:]}")
   _check_inputs()
   runtime.enable_compilation_cache()
+  if _comparing():
+    summary = tasks.design_comparison(
+        _OUT.value, problem=_PROBLEM.value, methods=_METHOD.value,
+        budget_s=_BUDGET_S.value, budget_evals=_BUDGET_EVALS.value,
+        xs=[float(v) for v in _XS.value],
+        radii=[float(v) for v in _RADII.value], shape=_SHAPE.value,
+        size=[float(v) for v in _SIZE.value], x0=_X0.value,
+        optimise_size=_OPTIMISE_SIZE.value, num_frames=_FRAMES.value,
+        objective=_OBJECTIVE.value, x_protect=_X_PROTECT.value,
+        target_x=_TARGET_X.value, temperature=_TEMPERATURE.value,
+        learning_rate=_LR.value, sigma=_SIGMA.value,
+        num_samples=_SAMPLES.value, batch_size=_BATCH.value,
+        sweep_points=_SWEEP.value, seed=_SEED.value)
+    print(f"winner: {summary['winner']}; report: {_OUT.value}/report.md")
+    return
   summary = tasks.inverse_design(
       _OUT.value, scene_path=_SCENE.value, shape=_SHAPE.value,
       size=[float(s) for s in _SIZE.value], x0=_X0.value,
@@ -139,7 +278,7 @@ def main(argv):
       target_x=_TARGET_X.value, temperature=_TEMPERATURE.value,
       workdir=_WORKDIR.value, steps=_STEPS.value,
       learning_rate=_LR.value, sweep_points=_SWEEP.value,
-      optimise_size=_OPTIMISE_SIZE.value, method=_METHOD.value,
+      optimise_size=_OPTIMISE_SIZE.value, method=_METHOD.value[0],
       sigma=_SIGMA.value, num_samples=_SAMPLES.value,
       estimator=_ESTIMATOR.value)
   print(f"improved under the MPM: {summary['improved_under_mpm']}; "

@@ -284,6 +284,56 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
   return result.summary
 
 
+def design_comparison(out_dir: str, *, problem: str = "two_obstacles",
+                      methods: Sequence[str] = ("adam",),
+                      budget_s: float | None = None,
+                      budget_evals: int | None = None,
+                      xs: Sequence[float] = (0.9, 1.1),
+                      radii: Sequence[float] = (0.04, 0.04),
+                      shape: str = "semicircle",
+                      size: Sequence[float] = (0.04,), x0: float = 1.0,
+                      optimise_size: bool = False, num_frames: int = 600,
+                      objective: str = "passed_fraction",
+                      x_protect: float = 0.4, target_x: float = 0.6,
+                      temperature: float | None = None,
+                      learning_rate: float = 0.05, sigma: float = 0.05,
+                      num_samples: int = 16, batch_size: int = 8,
+                      sweep_points: int = 3, seed: int = 0) -> dict:
+  """Inverse design against the baselines at equal budget on the MPM
+  (``gnsjax.design.comparison.compare``); returns the summary.
+
+  ``problem``: "placement" (one obstacle, ``shape``/``size`` at ``x0``; x,
+  and the size with ``optimise_size``) or "two_obstacles" (two semicircles
+  at ``xs`` of ``radii``; x and radius each, 4 parameters).
+  """
+  # pylint: disable=g-import-not-at-top
+  from gnsjax.design import baselines
+  from gnsjax.design import comparison
+  from gnsjax.design import objectives
+  from gnsjax.design import placement as placement_lib
+  # pylint: enable=g-import-not-at-top
+  if problem == "two_obstacles":
+    placement = placement_lib.MultiPlacement(
+        comparison.two_obstacles_scene(xs, radii, num_frames))
+  elif problem == "placement":
+    placement = placement_lib.Placement(
+        design_scene(shape, size, x0, num_frames),
+        free=("x", "size") if optimise_size else ("x",))
+  else:
+    raise ValueError(f"problem: {problem!r}; allowed: "
+                     f"{list(comparison.PROBLEMS)} (not built yet: "
+                     f"{list(comparison.NOT_BUILT)})")
+  obj = objectives.make(objective, x_protect=x_protect, target_x=target_x,
+                        temperature=temperature)
+  return comparison.compare(
+      out_dir, placement, obj, methods,
+      baselines.Budget(budget_evals, budget_s), problem=problem,
+      progress=lambda m: tqdm.tqdm(m, desc="methods", unit="method"),
+      log=lambda line: tqdm.tqdm.write(line), learning_rate=learning_rate,
+      sigma=sigma, num_samples=num_samples, batch_size=batch_size,
+      sweep_points=sweep_points, seed=seed)
+
+
 # The training recipe's parts, added one at a time (docs/gns.md): each entry
 # changes the config of the entry before it. "previous" is the recipe of the
 # first small model (with the SDF node features every model now has).

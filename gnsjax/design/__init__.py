@@ -3,7 +3,8 @@
 Layered on the public APIs of ``gnsjax`` and ``mpm``:
 
 - ``placement``: ``Placement``, the designed obstacle of a scene, its free
-  parameters (x, size) and their allowed ranges.
+  parameters (x, size) and their allowed ranges; ``MultiPlacement``,
+  several obstacles at once (MPM only), kept apart by its projection.
 - ``objectives``: avalanche objectives of a rollout [T, N, 2], each a smooth
   surrogate to differentiate beside its plain value.
 - ``rollouts``: both simulators as pure, differentiable functions of the
@@ -30,6 +31,7 @@ from gnsjax.design import smoothing
 from gnsjax.design.optimize import central_difference
 from gnsjax.design.optimize import optimise
 from gnsjax.design.optimize import sweep
+from gnsjax.design.placement import MultiPlacement
 from gnsjax.design.placement import Params
 from gnsjax.design.placement import Placement
 from gnsjax.design.placement import X_RANGE
@@ -43,7 +45,8 @@ from gnsjax.design.rollouts import mpm_positions
 from gnsjax.design.rollouts import mpm_window
 
 __all__ = [
-    "GNSDriver", "GNSRollout", "MPMDriver", "MPMRollout", "Params",
+    "GNSDriver", "GNSRollout", "MPMDriver", "MPMRollout", "MultiPlacement",
+    "Params",
     "Placement", "X_RANGE", "central_difference", "gns_positions",
     "mpm_positions", "mpm_window", "objectives", "optimise", "sweep",
     "with_obstacle",

@@ -25,7 +25,7 @@ Objective = Callable[[jax.Array], jax.Array]
 
 class Driver(Protocol):
   """A simulator as a function of the placement, run on the host."""
-  placement: placement_lib.Placement
+  placement: placement_lib.AnyPlacement
 
   def rollout(self, params: Params) -> np.ndarray:
     ...
@@ -37,16 +37,24 @@ class Driver(Protocol):
 
 def optimise(simulation: Driver, objective: Objective, params: Params, *,
              steps: int, learning_rate: float,
-             log: Callable[[dict], None] | None = None) -> list[dict]:
+             log: Callable[[dict], None] | None = None,
+             max_seconds: float | None = None,
+             plain: Callable[[np.ndarray], float] | None = None,
+             step_scale: Params | None = None) -> list[dict]:
   """Projected Adam on the placement.
 
   Args:
     simulation: a ``GNSDriver`` or ``MPMDriver``.
     objective: positions [T, N, 2] -> [] to minimise.
     params: the starting placement (inside the allowed ranges).
-    steps: gradient evaluations.
+    steps: gradient evaluations (at most, with ``max_seconds``).
     learning_rate: Adam's step size (m per iteration, roughly).
     log: called with each iteration's record.
+    max_seconds: no iteration starts after this much wall time (s).
+    plain: positions [T, N, 2] (host) -> float, recorded as "plain" per
+      iteration: the plain objective of the rollout at the iterate.
+    step_scale: multiplies Adam's updates per entry (a pytree like
+      ``params``), for parameters of different ranges.
 
   Returns:
     One record per iteration: iteration, the placement, the objective and
@@ -61,11 +69,16 @@ def optimise(simulation: Driver, objective: Objective, params: Params, *,
   opt = optax.adam(learning_rate)
   state = opt.init(params)
   history = []
+  begin = time.perf_counter()
   for i in range(steps):
+    if (max_seconds is not None and
+        time.perf_counter() - begin >= max_seconds):
+      break
     start = time.perf_counter()
-    value, grad, _ = simulation.value_and_grad(objective, params)
-    record = {"iteration": i, **plain(params, ""), "objective": value,
-              **plain(grad, "grad_"),
+    value, grad, positions = simulation.value_and_grad(objective, params)
+    record = {"iteration": i, **as_floats(params, ""), "objective": value,
+              **({"plain": plain(positions)} if plain is not None else {}),
+              **as_floats(grad, "grad_"),
               "seconds": time.perf_counter() - start}
     history.append(record)
     if log is not None:
@@ -74,20 +87,25 @@ def optimise(simulation: Driver, objective: Objective, params: Params, *,
       raise FloatingPointError(f"iteration {i}: the gradient at {params} is "
                                "not finite")
     updates, state = opt.update(grad, state, params)
+    if step_scale is not None:
+      updates = jax.tree.map(lambda u, c: u * c, updates, step_scale)
     params = placement.project(optax.apply_updates(params, updates))
   return history
 
 
-def plain(params: Params, prefix: str) -> dict[str, Any]:
+def as_floats(params: Params, prefix: str) -> dict[str, Any]:
   """Host floats of a placement for records: ``x`` as ``{prefix}x``, the
-  size as ``{prefix}size0`` and ``{prefix}size1``."""
+  size as ``{prefix}size0`` and ``{prefix}size1`` (arrays flattened in
+  row-major order: a ``MultiPlacement``'s x [2] as x0, x1, its size [2, 2]
+  as size0..size3)."""
   out = {}
   for k, v in params.items():
     v = np.asarray(v, np.float64)
     if v.ndim == 0:
       out[prefix + k] = float(v)
     else:
-      out.update({f"{prefix}{k}{i}": float(a) for i, a in enumerate(v)})
+      out.update({f"{prefix}{k}{i}": float(a)
+                  for i, a in enumerate(v.ravel())})
   return out
 
 
@@ -122,6 +140,9 @@ def central_difference(fn: Callable[[Params], float], params: Params,
       flat[i] = (plus - minus) / (2 * h)
     out[k] = flat.reshape(v.shape)
   return out
+
+
+plain = as_floats  # the former name
 
 
 def sweep(simulation: Driver, objective_plain: Callable[[np.ndarray], float],

@@ -163,6 +163,9 @@ class GNSRollout:
       num_frames: stored frames T (default the scene's); the rollout needs
         at least one learned step.
     """
+    if not isinstance(placement, placement_lib.Placement):
+      raise ValueError("the GNS designs one obstacle (a Placement); several "
+                       "obstacles run on the MPM only")
     scene = placement.scene
     window = np.asarray(window, np.float32)
     num_frames = num_frames or scene.num_frames
@@ -362,26 +365,22 @@ class GNSDriver:
 # ------------------------------------------------------------------- MPM ---
 
 
-def covering_nodes(placement: placement_lib.Placement,
+def covering_nodes(placement: placement_lib.AnyPlacement,
                    spec: transfer.GridSpec, bucket: int = 256) -> np.ndarray:
-  """Boundary nodes [B] for the obstacle anywhere in its range (and, if its
-  size is free, at its largest size), padded to a multiple of ``bucket``.
+  """Boundary nodes [B] for the designed obstacles anywhere in their range
+  (and, if their sizes are free, at their largest sizes), padded to a
+  multiple of ``bucket``.
 
-  Nodes far from the obstacle's current place get zero weight
+  Nodes far from an obstacle's current place get zero weight
   (``boundary.make_field``), so extra nodes cost time, not accuracy.
   """
   scene = placement.scene
   ramp = geometry.ramp_params(scene.ramp)
-  params = placement.initial()
-  if "size" in params:
-    params = dict(params, size=jnp.asarray(placement.size_range()[:, 1]))
-  lo, hi = placement.x_range
   index = set()
-  for x in np.arange(lo, hi + spec.dx / 4, spec.dx / 4):
-    obstacles = placement.obstacles(dict(params, x=jnp.float32(x)))
+  for params in placement.covering_params(spec.dx / 4):
     index.update(boundary.select_nodes(spec, scene.domain.width,
                                        scene.domain.height, ramp,
-                                       obstacles).tolist())
+                                       placement.obstacles(params)).tolist())
   index = np.asarray(sorted(index), np.int32)
   return np.pad(index, (0, -len(index) % bucket))
 
@@ -410,7 +409,7 @@ class MPMRollout:
   physics: solver.SimParams
   index: jax.Array
   ramp: geometry.RampParams
-  placement: placement_lib.Placement = struct.field(pytree_node=False)
+  placement: placement_lib.AnyPlacement = struct.field(pytree_node=False)
   spec: transfer.GridSpec = struct.field(pytree_node=False)
   n_substeps: int = struct.field(pytree_node=False)
   n_particles: int = struct.field(pytree_node=False)
@@ -418,7 +417,7 @@ class MPMRollout:
   num_frames: int = struct.field(pytree_node=False)
 
   @classmethod
-  def create(cls, placement: placement_lib.Placement,
+  def create(cls, placement: placement_lib.AnyPlacement,
              num_frames: int | None = None) -> "MPMRollout":
     """The rollout of ``placement`` (host: the lattice and node list; runs
     no simulation). ``num_frames``: T (default the scene's)."""
@@ -476,11 +475,12 @@ class MPMDriver:
     self.sim = sim
 
   @property
-  def placement(self) -> placement_lib.Placement:
+  def placement(self) -> placement_lib.AnyPlacement:
     return self.sim.placement
 
   def _check(self, params, finite, max_speed):
-    name = f"{self.placement.scene.name} (obstacle x = {float(params['x']):g})"
+    name = (f"{self.placement.scene.name} "
+            f"({self.placement.describe(params)})")
     mpm.check_frames(name, 1, np.asarray(finite), np.asarray(max_speed),
                      self.sim.max_speed)
 

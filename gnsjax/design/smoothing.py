@@ -173,7 +173,7 @@ class SmoothedMPMDriver:
     self._key, self._calls = jax.random.key(seed), 0
 
   @property
-  def placement(self) -> placement_lib.Placement:
+  def placement(self) -> placement_lib.AnyPlacement:
     return self.driver.placement
 
   def rollout(self, params: Params) -> np.ndarray:

@@ -49,3 +49,9 @@ def tiny_gns(placement: placement_lib.Placement, num_frames: int,
   sim = rollouts.GNSRollout.create(placement, model, problem, window,
                                    num_frames)
   return rollouts.GNSDriver(sim, params)
+
+
+# Two semicircles the sand meets within 40 frames: one under the heap, one
+# just downstream (base centres 0.05 m apart, the sum of their radii).
+TWO_OBSTACLES = [{"shape": "semicircle", "x": X, "radius": 0.03},
+                 {"shape": "semicircle", "x": 1.225, "radius": 0.02}]
