@@ -10,7 +10,6 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import time
 
 from absl.testing import absltest
@@ -85,14 +84,7 @@ def _reference(data, workdir, num_steps):
   return _losses(workdir)
 
 
-class TwoProcessTrainingTest(absltest.TestCase):
-
-  def setUp(self):
-    super().setUp()
-    tmp = tempfile.TemporaryDirectory()
-    self.addCleanup(tmp.cleanup)
-    self.dir = tmp.name
-    self.data = fixtures.tiny_dataset()
+class TwoProcessTrainingTest(fixtures.TinyRunTestCase):
 
   def assert_losses_equal(self, got, want):
     self.assertEqual([s for s, _ in got], [s for s, _ in want])

@@ -4,6 +4,8 @@ import functools
 import os
 import tempfile
 
+from absl.testing import absltest
+
 from experiments.configs import test as test_config
 from mpm import dataset
 
@@ -34,3 +36,15 @@ def tiny_config(**train):
   for key, value in train.items():
     config.train[key] = value
   return config
+
+
+class TinyRunTestCase(absltest.TestCase):
+  """A temporary work directory (``self.dir``) and the tiny dataset
+  (``self.data``)."""
+
+  def setUp(self):
+    super().setUp()
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    self.dir = tmp.name
+    self.data = tiny_dataset()

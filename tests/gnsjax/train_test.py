@@ -42,18 +42,7 @@ def assert_same_problem(test, got: train.Problem, want: train.Problem):
                    dataclasses.replace(want, stats=None, bounds=None))
 
 
-class TinyRunTestCase(absltest.TestCase):
-  """A temporary work directory and the tiny dataset."""
-
-  def setUp(self):
-    super().setUp()
-    tmp = tempfile.TemporaryDirectory()
-    self.addCleanup(tmp.cleanup)
-    self.dir = tmp.name
-    self.data = fixtures.tiny_dataset()
-
-
-class TrainTest(TinyRunTestCase):
+class TrainTest(fixtures.TinyRunTestCase):
 
   def test_overfits_a_tiny_dataset(self):
     steps = 300
@@ -268,7 +257,7 @@ class ProblemTest(absltest.TestCase):
         train.check_config(fixtures.tiny_config(**{key: value}))
 
 
-class PushforwardTest(TinyRunTestCase):
+class PushforwardTest(fixtures.TinyRunTestCase):
 
   P = 2
 
