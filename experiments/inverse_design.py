@@ -74,8 +74,9 @@ _OPTIMISE_SIZE = flags.DEFINE_bool(
 
 
 # gnsjax.design.comparison's names (imported late: it imports jax).
-_PROBLEMS = ("placement", "two_obstacles")
-_NOT_BUILT = ("baffles", "calibrate")
+_PROBLEMS = ("placement", "two_obstacles", "calibrate")
+_NOT_BUILT = ("baffles",)
+_CALIBRATION_METHODS = ("adam", "cmaes", "random", "sweep")
 _METHODS = ("adam", "adam_smoothed", "cmaes", "random", "sweep")
 _BASELINES = ("cmaes", "random", "sweep")
 _RADIUS_RANGE = sampler.SIZE_RANGES["semicircle"]["radius"]
@@ -84,7 +85,9 @@ _PROBLEM = flags.DEFINE_enum(
     "problem", "placement", list(_PROBLEMS + _NOT_BUILT),
     "placement: one obstacle (x, and its size with --optimise_size); "
     "two_obstacles: two semicircles, x and radius each (4 parameters, MPM "
-    "only). baffles and calibrate are not built yet (issue 14).")
+    "only); calibrate: the sand's friction angle and the basal friction from "
+    "an observed deposit (--truth, --start; MPM only). baffles is not built "
+    "yet (issue 14).")
 _METHOD = flags.DEFINE_list(
     "method", ["adam"],
     "One or more (comma-separated) of: adam (plain gradients), "
@@ -99,6 +102,13 @@ _XS = flags.DEFINE_list("xs", ["0.9", "1.1"], "two_obstacles: starting "
                         "base positions (m), in [0.5, 1.3].")
 _RADII = flags.DEFINE_list("radii", ["0.04", "0.04"], "two_obstacles: "
                            "starting radii (m), in [0.02, 0.05].")
+_TRUTH = flags.DEFINE_list(
+    "truth", ["33.3", "0.37"], "calibrate: the friction angle (deg) and "
+    "basal friction that make the observed deposit (hidden from the "
+    "search).")
+_START = flags.DEFINE_list(
+    "start", ["25", "0.8"], "calibrate: where the search starts (friction "
+    "angle in deg, basal friction).")
 _BATCH = flags.DEFINE_integer("batch_size", 8, "Designs per batched MPM "
                               "program of the baselines (CMA-ES's "
                               "population).", lower_bound=2)
@@ -154,6 +164,25 @@ def _check_comparison() -> None:
   if _SAMPLES.value % 2:
     raise runtime.InputError(f"--num_samples={_SAMPLES.value}; allowed: "
                              "an even number >= 2 (antithetic pairs)")
+  if _PROBLEM.value == "calibrate":
+    if "adam_smoothed" in methods:
+      raise runtime.InputError(
+          f"--method={','.join(methods)}: allowed for --problem=calibrate: "
+          f"one or more of {', '.join(_CALIBRATION_METHODS)}")
+    from gnsjax.design import calibration  # pylint: disable=g-import-not-at-top
+    for name, flag in (("truth", _TRUTH), ("start", _START)):
+      try:
+        values = [float(v) for v in flag.value]
+      except ValueError:
+        values = []
+      if len(values) != 2:
+        raise runtime.InputError(
+            f"--{name}={','.join(flag.value)}: allowed: two numbers, the "
+            "friction angle (deg) and the basal friction")
+      try:
+        calibration.check(values)
+      except scene_lib.InputError as e:
+        raise runtime.InputError(f"--{name}: {e}") from None
   if _PROBLEM.value == "two_obstacles":
     lo, hi = _X_RANGE
     xs = _floats("xs", _XS.value, 2)
@@ -184,7 +213,7 @@ def _check_inputs() -> None:
                              f"{', '.join(_PROBLEMS)}")
   if _comparing():
     _check_comparison()
-    if _PROBLEM.value == "two_obstacles":
+    if _PROBLEM.value in ("two_obstacles", "calibrate"):
       if _TEMPERATURE.value is not None and not _TEMPERATURE.value > 0:
         raise runtime.InputError(f"--temperature={_TEMPERATURE.value:g}; "
                                  "allowed: > 0 (m)")
@@ -255,6 +284,15 @@ def main(argv):
     raise app.UsageError(f"unexpected arguments: {argv[1:]}")
   _check_inputs()
   runtime.enable_compilation_cache()
+  if _PROBLEM.value == "calibrate":
+    summary = tasks.calibration_study(
+        _OUT.value, truth=[float(v) for v in _TRUTH.value],
+        start=[float(v) for v in _START.value], methods=_METHOD.value,
+        budget_s=_BUDGET_S.value, budget_evals=_BUDGET_EVALS.value,
+        num_frames=_FRAMES.value, learning_rate=_LR.value,
+        batch_size=_BATCH.value, sweep_points=_SWEEP.value, seed=_SEED.value)
+    print(f"report: {_OUT.value}/report.md")
+    return
   if _comparing():
     summary = tasks.design_comparison(
         _OUT.value, problem=_PROBLEM.value, methods=_METHOD.value,

@@ -252,6 +252,36 @@ def design_scene(shape: str = "semicircle", size: Sequence[float] = (0.04,),
   return placement.with_obstacle(base, shape, x0, **dict(zip(keys, size)))
 
 
+def calibration_study(out_dir: str, *, truth: Sequence[float],
+                      start: Sequence[float], methods: Sequence[str],
+                      budget_s: float | None = None,
+                      budget_evals: int | None = None,
+                      num_frames: int = 600, spacing: float = 0.01,
+                      num_particles: int = 250, learning_rate: float = 0.05,
+                      batch_size: int = 8, sweep_points: int = 5,
+                      seed: int = 0) -> dict:
+  """Inverse analysis (``gnsjax.design.calibration.study``): the paper's
+  heap, no obstacle, observed by the MPM at ``truth``; each method
+  recovers the friction angle and basal friction from ``start``."""
+  # pylint: disable=g-import-not-at-top
+  from gnsjax.design import baselines
+  from gnsjax.design import calibration
+  from mpm import scene as scene_lib
+  # pylint: enable=g-import-not-at-top
+  scene = mpm.Scene.from_dict({
+      "name": "calibrate",
+      "granular": {"box": list(scene_lib.Granular.box), "spacing": spacing,
+                   "num_particles": num_particles},
+      "num_frames": num_frames})
+  problem = calibration.Calibration.observe(scene, truth,
+                                            batch_size=batch_size)
+  return calibration.study(
+      out_dir, problem, truth, start, methods,
+      baselines.Budget(budget_evals, budget_s),
+      log=lambda line: tqdm.tqdm.write(line), learning_rate=learning_rate,
+      points=sweep_points, seed=seed)
+
+
 def inverse_design(out_dir: str, *, scene_path: str | None = None,
                    shape: str = "semicircle", size: Sequence[float] = (0.04,),
                    x0: float = 1.0, num_frames: int = 600,

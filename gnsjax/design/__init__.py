@@ -13,6 +13,10 @@ Layered on the public APIs of ``gnsjax`` and ``mpm``:
 - ``optimize``: projected Adam, the brute-force sweep, central differences.
 - ``smoothing``: gradients of the objective smoothed in the parameters at a
   user-set scale sigma (pathwise and score-function estimators, batched).
+- ``baselines``: random search, grid sweep and CMA-ES under a budget, on
+  the batched MPM; ``comparison``: every method at equal budget, verified.
+- ``calibration``: the sand's friction angle and the basal friction from an
+  observed final deposit (imported on its own).
 - ``study``: a whole study (optimise, MPM verdict, sweep; csv, json and a
   report), imported on its own: it loads trained runs
   (``gnsjax.evaluate``).

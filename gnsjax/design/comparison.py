@@ -229,7 +229,7 @@ def compare(out_dir: str, placement: placement_lib.AnyPlacement,
                         placement.to_vector(placement.initial()).tolist())),
       "start_value": start_value, "runs": runs, "winner": winner["method"],
       "settings": {k: v for k, v in kwargs.items()},
-      "environment": _environment()}
+      "environment": environment()}
   mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
   with open(os.path.join(out_dir, "report.md"), "w") as f:
     f.write(report(summary))
@@ -237,7 +237,7 @@ def compare(out_dir: str, placement: placement_lib.AnyPlacement,
   return summary
 
 
-def _environment() -> dict[str, Any]:
+def environment() -> dict[str, Any]:
   import platform  # pylint: disable=g-import-not-at-top
   return {"machine": platform.machine(), "processor": platform.processor(),
           "cpus": os.cpu_count(), "affinity": sorted(os.sched_getaffinity(0)),
@@ -293,6 +293,9 @@ def plot(rows: list[dict], summary: dict, out: str) -> str:
     ax.step(t, v, where="post", label=f"{r['method']} "
             f"({r['evaluations']} evals)")
   ax.axhline(summary["start_value"], color="gray", ls=":", label="start")
+  values = [q["best"] for q in rows] + [summary["start_value"]]
+  if min(values) > 0 and max(values) / min(values) > 100:
+    ax.set_yscale("log")   # misfits that fall by decades
   ax.set_xlabel("wall time after compilation (s)")
   unit = f" ({summary['unit']})" if summary["unit"] else ""
   ax.set_ylabel(f"best {summary['objective']} so far, MPM{unit}")

@@ -180,7 +180,21 @@ ROWS = (
     ("inverse_design_problem_not_built", "experiments.inverse_design",
      ["--out={d}/out", "--problem=baffles"],
      "--problem=baffles: not built yet (issue 14); allowed: placement, "
-     "two_obstacles"),
+     "two_obstacles, calibrate"),
+    ("inverse_design_calibrate_truth", "experiments.inverse_design",
+     ["--out={d}/out", "--problem=calibrate", "--truth=60,0.4",
+      "--budget_s=10", "--method=cmaes"],
+     "--truth: friction_angle_deg = 60: allowed range [20, 50]"),
+    ("inverse_design_calibrate_start", "experiments.inverse_design",
+     ["--out={d}/out", "--problem=calibrate", "--start=25",
+      "--budget_s=10", "--method=cmaes"],
+     "--start=25: allowed: two numbers, the friction angle (deg) and the "
+     "basal friction"),
+    ("inverse_design_calibrate_smoothed", "experiments.inverse_design",
+     ["--out={d}/out", "--problem=calibrate", "--budget_s=10",
+      "--method=adam_smoothed"],
+     "allowed for --problem=calibrate: one or more of adam, cmaes, random, "
+     "sweep"),
     ("inverse_design_two_overlapping", "experiments.inverse_design",
      ["--out={d}/out", "--problem=two_obstacles", "--xs=1.0,1.05",
       "--radii=0.04,0.04", "--budget_s=10"],
