@@ -18,8 +18,10 @@ Methods against baselines at equal budget, on the MPM:
 runs each method for the budget (after compiling it), judges every design
 by the MPM, re-simulates each method's best, and writes the best objective
 against wall time (objective_vs_time.png), trace.csv, summary.json and
-report.md. This mode runs when --problem=two_obstacles, a baseline
-(cmaes, random, sweep) or several methods are named, or a budget is given.
+report.md. This mode runs when --problem=two_obstacles or baffles, a
+baseline (cmaes, random, sweep) or several methods are named, or a budget
+is given. --problem=calibrate recovers the sand's friction angle and the
+basal friction from a deposit the MPM made at --truth.
 """
 
 from absl import app
@@ -74,20 +76,20 @@ _OPTIMISE_SIZE = flags.DEFINE_bool(
 
 
 # gnsjax.design.comparison's names (imported late: it imports jax).
-_PROBLEMS = ("placement", "two_obstacles", "calibrate")
-_NOT_BUILT = ("baffles",)
+_PROBLEMS = ("placement", "two_obstacles", "baffles", "calibrate")
+_BAFFLES = (2, 8)   # baffles in a row: the range this flag allows
 _CALIBRATION_METHODS = ("adam", "cmaes", "random", "sweep")
 _METHODS = ("adam", "adam_smoothed", "cmaes", "random", "sweep")
 _BASELINES = ("cmaes", "random", "sweep")
 _RADIUS_RANGE = sampler.SIZE_RANGES["semicircle"]["radius"]
 
 _PROBLEM = flags.DEFINE_enum(
-    "problem", "placement", list(_PROBLEMS + _NOT_BUILT),
+    "problem", "placement", list(_PROBLEMS),
     "placement: one obstacle (x, and its size with --optimise_size); "
     "two_obstacles: two semicircles, x and radius each (4 parameters, MPM "
     "only); calibrate: the sand's friction angle and the basal friction from "
-    "an observed deposit (--truth, --start; MPM only). baffles is not built "
-    "yet (issue 14).")
+    "an observed deposit (--truth, --start; MPM only); baffles: a row of "
+    "--num_baffles small rectangles, their x (MPM only).")
 _METHOD = flags.DEFINE_list(
     "method", ["adam"],
     "One or more (comma-separated) of: adam (plain gradients), "
@@ -102,6 +104,8 @@ _XS = flags.DEFINE_list("xs", ["0.9", "1.1"], "two_obstacles: starting "
                         "base positions (m), in [0.5, 1.3].")
 _RADII = flags.DEFINE_list("radii", ["0.04", "0.04"], "two_obstacles: "
                            "starting radii (m), in [0.02, 0.05].")
+_NUM_BAFFLES = flags.DEFINE_integer(
+    "num_baffles", 5, "baffles: how many, in a row (%d-%d)." % _BAFFLES)
 _TRUTH = flags.DEFINE_list(
     "truth", ["33.3", "0.37"], "calibrate: the friction angle (deg) and "
     "basal friction that make the observed deposit (hidden from the "
@@ -183,6 +187,11 @@ def _check_comparison() -> None:
         calibration.check(values)
       except scene_lib.InputError as e:
         raise runtime.InputError(f"--{name}: {e}") from None
+  if _PROBLEM.value == "baffles":
+    lo, hi = _BAFFLES
+    if not lo <= _NUM_BAFFLES.value <= hi:
+      raise runtime.InputError(f"--num_baffles={_NUM_BAFFLES.value}; "
+                               f"allowed: {lo}-{hi}")
   if _PROBLEM.value == "two_obstacles":
     lo, hi = _X_RANGE
     xs = _floats("xs", _XS.value, 2)
@@ -207,13 +216,9 @@ def _check_comparison() -> None:
 def _check_inputs() -> None:
   """Refuses bad flags before anything is created or compiled: the design
   range of x is one range, whether x comes from --x0 or --scene."""
-  if _PROBLEM.value in _NOT_BUILT:
-    raise runtime.InputError(f"--problem={_PROBLEM.value}: not built yet "
-                             "(issue 14); allowed: "
-                             f"{', '.join(_PROBLEMS)}")
   if _comparing():
     _check_comparison()
-    if _PROBLEM.value in ("two_obstacles", "calibrate"):
+    if _PROBLEM.value in ("two_obstacles", "baffles", "calibrate"):
       if _TEMPERATURE.value is not None and not _TEMPERATURE.value > 0:
         raise runtime.InputError(f"--temperature={_TEMPERATURE.value:g}; "
                                  "allowed: > 0 (m)")
@@ -298,7 +303,8 @@ def main(argv):
         _OUT.value, problem=_PROBLEM.value, methods=_METHOD.value,
         budget_s=_BUDGET_S.value, budget_evals=_BUDGET_EVALS.value,
         xs=[float(v) for v in _XS.value],
-        radii=[float(v) for v in _RADII.value], shape=_SHAPE.value,
+        radii=[float(v) for v in _RADII.value],
+        num_baffles=_NUM_BAFFLES.value, shape=_SHAPE.value,
         size=[float(v) for v in _SIZE.value], x0=_X0.value,
         optimise_size=_OPTIMISE_SIZE.value, num_frames=_FRAMES.value,
         objective=_OBJECTIVE.value, x_protect=_X_PROTECT.value,

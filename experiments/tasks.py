@@ -320,6 +320,7 @@ def design_comparison(out_dir: str, *, problem: str = "two_obstacles",
                       budget_evals: int | None = None,
                       xs: Sequence[float] = (0.9, 1.1),
                       radii: Sequence[float] = (0.04, 0.04),
+                      num_baffles: int = 5,
                       shape: str = "semicircle",
                       size: Sequence[float] = (0.04,), x0: float = 1.0,
                       optimise_size: bool = False, num_frames: int = 600,
@@ -333,8 +334,9 @@ def design_comparison(out_dir: str, *, problem: str = "two_obstacles",
   (``gnsjax.design.comparison.compare``); returns the summary.
 
   ``problem``: "placement" (one obstacle, ``shape``/``size`` at ``x0``; x,
-  and the size with ``optimise_size``) or "two_obstacles" (two semicircles
-  at ``xs`` of ``radii``; x and radius each, 4 parameters).
+  and the size with ``optimise_size``), "two_obstacles" (two semicircles
+  at ``xs`` of ``radii``; x and radius each, 4 parameters) or "baffles" (a
+  row of ``num_baffles`` small rectangles; their x).
   """
   # pylint: disable=g-import-not-at-top
   from gnsjax.design import baselines
@@ -345,14 +347,17 @@ def design_comparison(out_dir: str, *, problem: str = "two_obstacles",
   if problem == "two_obstacles":
     placement = placement_lib.MultiPlacement(
         comparison.two_obstacles_scene(xs, radii, num_frames))
+  elif problem == "baffles":
+    placement = placement_lib.MultiPlacement(
+        comparison.baffles_scene(num_baffles, num_frames),
+        indices=tuple(range(num_baffles)), free=("x",))
   elif problem == "placement":
     placement = placement_lib.Placement(
         design_scene(shape, size, x0, num_frames),
         free=("x", "size") if optimise_size else ("x",))
   else:
     raise ValueError(f"problem: {problem!r}; allowed: "
-                     f"{list(comparison.PROBLEMS)} (not built yet: "
-                     f"{list(comparison.NOT_BUILT)})")
+                     f"{list(comparison.PROBLEMS)}")
   obj = objectives.make(objective, x_protect=x_protect, target_x=target_x,
                         temperature=temperature)
   return comparison.compare(

@@ -42,9 +42,10 @@ from gnsjax.design import smoothing
 from mpm import io as mpm_io
 
 METHODS = ("adam", "adam_smoothed", "cmaes", "random", "sweep")
-# Problems of issue 14; "baffles" and "calibrate" are not built yet.
-PROBLEMS = ("placement", "two_obstacles")
-NOT_BUILT = ("baffles", "calibrate")
+# The placement problems of issue 14 (calibration: ``calibration.study``).
+PROBLEMS = ("placement", "two_obstacles", "baffles")
+# A baffle: a small rectangle (m), within Table 1's rectangle sizes.
+BAFFLE_SIZE = (0.02, 0.04)
 
 
 def step_scale(placement: placement_lib.AnyPlacement,
@@ -308,6 +309,26 @@ def plot(rows: list[dict], summary: dict, out: str) -> str:
   plt.close(fig)
   os.replace(tmp, out)
   return out
+
+
+def baffles_scene(count: int = 5, num_frames: int = 600,
+                  spacing: float = 0.01, num_particles: int = 250,
+                  x_range: Sequence[float] = placement_lib.X_RANGE
+                  ) -> mpm.Scene:
+  """The paper's heap with a row of ``count`` baffles (``BAFFLE_SIZE``
+  rectangles) evenly spaced over ``x_range``, their centres one reach in
+  from its ends."""
+  width, height = BAFFLE_SIZE
+  reach = float(np.hypot(width / 2, height))
+  lo, hi = x_range
+  xs = np.linspace(lo + reach, hi - reach, count)
+  return mpm.Scene.from_dict({
+      "name": f"design_baffles_{count}",
+      "granular": {"box": list(mpm.Scene().granular.box), "spacing": spacing,
+                   "num_particles": num_particles},
+      "num_frames": num_frames,
+      "obstacles": [{"shape": "rectangle", "x": float(x), "width": width,
+                     "height": height} for x in xs]})
 
 
 def two_obstacles_scene(x: Sequence[float] = (0.9, 1.1),

@@ -176,11 +176,11 @@ ROWS = (
      "--gns small: trained at spacing 0.01 m, which is not in --spacings"),
     ("inverse_design_x0_high", "experiments.inverse_design",
      ["--out={d}/out", "--x0=1.6"], "--x0=1.6; allowed: [0.5, 1.3] m"),
-    # Issue 14: problems not built yet, bad designs, a missing budget.
-    ("inverse_design_problem_not_built", "experiments.inverse_design",
-     ["--out={d}/out", "--problem=baffles"],
-     "--problem=baffles: not built yet (issue 14); allowed: placement, "
-     "two_obstacles, calibrate"),
+    # Issue 14: bad problems and designs, a missing budget.
+    ("inverse_design_baffles_count", "experiments.inverse_design",
+     ["--out={d}/out", "--problem=baffles", "--num_baffles=9",
+      "--budget_s=10"],
+     "--num_baffles=9; allowed: 2-8"),
     ("inverse_design_calibrate_truth", "experiments.inverse_design",
      ["--out={d}/out", "--problem=calibrate", "--truth=60,0.4",
       "--budget_s=10", "--method=cmaes"],

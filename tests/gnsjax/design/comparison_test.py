@@ -56,5 +56,28 @@ class CompareTest(absltest.TestCase):
                                rtol=1e-5)
 
 
+
+class BafflesTest(absltest.TestCase):
+
+  def test_a_row_of_baffles_in_range_and_kept_apart(self):
+    scene = comparison.baffles_scene(6, num_frames=2)
+    shapes = {(o.shape, o.width, o.height) for o in scene.obstacles}
+    self.assertEqual(shapes, {("rectangle",) + comparison.BAFFLE_SIZE})
+    p = placement_lib.MultiPlacement(scene, indices=tuple(range(6)),
+                                     free=("x",))
+    x = p.to_vector(p.initial())
+    lo, hi = placement_lib.X_RANGE
+    reach = scene.obstacles[0].reach
+    self.assertLen(x, 6)
+    np.testing.assert_allclose([x[0] - reach, x[-1] + reach], [lo, hi])
+    # Three baffles asked at one place are pushed apart, inside the range.
+    x[1:4] = 0.9
+    repaired = p.to_vector(p.project(p.from_vector(x)))
+    gaps = np.diff(np.sort(repaired))
+    self.assertTrue(np.all(gaps >= 2 * reach - 1e-6), gaps)
+    self.assertTrue(np.all((repaired >= lo) & (repaired <= hi)))
+    p.check(p.from_vector(repaired))
+
+
 if __name__ == "__main__":
   absltest.main()
