@@ -199,6 +199,18 @@ def run(method: str, fn: BatchFn, low, high, x0, *, budget: Budget,
 # ------------------------------------------------ the batched MPM objective ---
 
 
+def pad_batch(vectors, batch_size: int, what: str = "designs"
+              ) -> tuple[np.ndarray, int]:
+  """``vectors`` [B, P] padded with copies of the last to [batch_size, P]
+  (so one compiled program serves every call), and B."""
+  vectors = np.asarray(vectors, np.float64)
+  b = len(vectors)
+  if not 1 <= b <= batch_size:
+    raise ValueError(f"{b} {what}; allowed: 1..{batch_size}")
+  return np.concatenate([vectors, np.repeat(vectors[-1:], batch_size - b,
+                                            0)]), b
+
+
 @jax.jit
 def _mpm_first_last(sim: rollouts.MPMRollout, params):
   def one(p):
@@ -237,12 +249,7 @@ class MPMBatchObjective:
 
   def __call__(self, vectors: np.ndarray) -> np.ndarray:
     """Plain objective values [B] of the design vectors [B, P]."""
-    vectors = np.asarray(vectors, np.float64)
-    b = len(vectors)
-    if not 1 <= b <= self.batch_size:
-      raise ValueError(f"{b} designs; allowed: 1..{self.batch_size}")
-    padded = np.concatenate([vectors, np.repeat(vectors[-1:],
-                                                self.batch_size - b, 0)])
+    padded, b = pad_batch(vectors, self.batch_size)
     params = [self.placement.from_vector(v) for v in padded]
     params = jax.tree.map(lambda *a: jnp.stack(a), *params)
     x, finite, max_speed = _mpm_first_last(self.sim, params)
