@@ -259,17 +259,8 @@ def read_csv(path: str) -> list[dict]:
     return list(csv.DictReader(f))
 
 
-def write_csv(path: str, rows: Sequence[dict]):
-  """Rows (dicts with the first row's keys) as CSV, atomically."""
-  if not rows:
-    return
-  tmp = f"{path}.tmp-{os.getpid()}"
-  with open(tmp, "w", newline="") as f:
-    writer = csv.DictWriter(f, fieldnames=list(rows[0]),
-                            extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(rows)
-  os.replace(tmp, path)
+# The entry points' CSV writer (atomic).
+write_csv = mpm_io.write_csv
 
 
 def evaluate(workdir: str, data_dir: str, out_dir: str, *,

@@ -19,7 +19,9 @@ modules of ``mpm`` import only jax and numpy, and ``import mpm`` does not
 load this one.
 """
 
+import csv
 import dataclasses
+import io
 import json
 import os
 import socket
@@ -186,6 +188,19 @@ def write_text(path: str, text: str) -> None:
   with open(tmp, "w") as f:
     f.write(text)
   os.replace(tmp, path)
+
+
+def write_csv(path: str, rows: Sequence[dict]) -> None:
+  """Rows (dicts; the columns are the first row's keys, others ignored) as
+  CSV, atomically; nothing is written for no rows."""
+  if not rows:
+    return
+  text = io.StringIO(newline="")
+  writer = csv.DictWriter(text, fieldnames=list(rows[0]),
+                          extrasaction="ignore")
+  writer.writeheader()
+  writer.writerows(rows)
+  write_text(path, text.getvalue())
 
 
 def write_json(path: str, obj) -> None:

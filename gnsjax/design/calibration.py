@@ -14,7 +14,6 @@ the observed one's mean square. A deposit's mass distribution carries its
 runout (basal friction) and its slope (friction angle).
 """
 
-import csv
 import dataclasses
 import math
 import os
@@ -209,15 +208,10 @@ class Calibration:
 
   def __call__(self, thetas: np.ndarray) -> np.ndarray:
     """Misfits [B] of trials [B, 2] (one vmapped program per call)."""
-    thetas = np.asarray(thetas, np.float64)
-    b = len(thetas)
-    if not 1 <= b <= self.batch_size:
-      raise ValueError(f"{b} trials; allowed: 1..{self.batch_size}")
-    padded = np.concatenate([thetas, np.repeat(thetas[-1:],
-                                               self.batch_size - b, 0)])
+    padded, b = baselines.pad_batch(thetas, self.batch_size, "trials")
     values, finite, speed = map(np.asarray, _batch(
         self.sim, jnp.asarray(padded, jnp.float32), self.observed))
-    self._check(thetas, finite[:b], speed[:b])
+    self._check(padded[:b], finite[:b], speed[:b])
     return values[:b].astype(np.float64)
 
   def value_and_grad(self, theta) -> tuple[float, np.ndarray]:
@@ -335,7 +329,7 @@ def study(out_dir: str, problem: Calibration, truth, start,
       "start_front_error": problem.front_error(start),
       "budget": budget._asdict(), "runs": runs,
       "settings": dict(kwargs), "environment": comparison.environment()}
-  _write_csv(os.path.join(out_dir, "trace.csv"), rows)
+  mpm_io.write_csv(os.path.join(out_dir, "trace.csv"), rows)
   mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
   mpm_io.write_text(os.path.join(out_dir, "report.md"), report(summary))
   comparison.plot(rows, summary, os.path.join(out_dir, "objective_vs_time.png"))
@@ -344,15 +338,6 @@ def study(out_dir: str, problem: Calibration, truth, start,
 
 def _describe(theta) -> str:
   return f"friction angle {theta[0]:.2f} deg, basal friction {theta[1]:.3f}"
-
-
-def _write_csv(path: str, rows: list[dict]) -> None:
-  tmp = f"{path}.tmp-{os.getpid()}"
-  with open(tmp, "w", newline="") as f:
-    writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-  os.replace(tmp, path)
 
 
 def report(summary: dict) -> str:

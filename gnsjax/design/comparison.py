@@ -23,7 +23,6 @@ seconds, value, best so far, the design), ``summary.json``, ``report.md``
 against wall time per method).
 """
 
-import csv
 import os
 import time
 from typing import Any, Callable, Sequence
@@ -217,10 +216,7 @@ def compare(out_dir: str, placement: placement_lib.AnyPlacement,
                                                      "value", "best")},
               **dict(zip(placement.names, r["vector"]))}
              for r in result["trace"]]
-  with open(os.path.join(out_dir, "trace.csv"), "w", newline="") as f:
-    writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
+  mpm_io.write_csv(os.path.join(out_dir, "trace.csv"), rows)
   winner = min(runs, key=lambda r: (r["verified"], r["best_at_s"]))
   summary = {
       "problem": problem, "scene": placement.scene.to_dict(),

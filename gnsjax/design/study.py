@@ -12,7 +12,6 @@ compare with the brute-force sweep a user would otherwise run.
 It returns them too, for plots (``experiments.figures.objective_vs_x``).
 """
 
-import csv
 import os
 from typing import Any, Callable, NamedTuple
 
@@ -43,13 +42,6 @@ class StudyResult(NamedTuple):
   summary: dict[str, Any]
   history: list[dict]
   sweep: dict[str, list[dict]]
-
-
-def _write_csv(path: str, rows: list[dict]):
-  with open(path, "w", newline="") as f:
-    writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
 
 
 def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
@@ -112,7 +104,7 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
   history = optimize.optimise(driver, objective.smooth, start,
                               steps=steps, learning_rate=learning_rate,
                               log=log_record)
-  _write_csv(os.path.join(out_dir, "history.csv"), history)
+  mpm_io.write_csv(os.path.join(out_dir, "history.csv"), history)
   best = min(history, key=lambda r: r["objective"])
 
   # The MPM's verdict on the start and on the optimum.
@@ -138,7 +130,7 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
                                     for n in rows for k in ("plain", "smooth",
                                                             "seconds")}}
                 for i, x in enumerate(xs)]
-  _write_csv(os.path.join(out_dir, "sweep.csv"), sweep_rows)
+  mpm_io.write_csv(os.path.join(out_dir, "sweep.csv"), sweep_rows)
   mpm_best = min(rows["mpm"], key=lambda r: r["plain"])
   summary = {
       "scene": scene.to_dict(), "objective": objective.name,

@@ -1,5 +1,6 @@
 """Tests for `mpm.dataset` and `mpm.io`: generation, resume, files, errors."""
 
+import csv
 import dataclasses
 import glob
 import os
@@ -426,6 +427,22 @@ class WorkerLifetimeTest(absltest.TestCase):
     if alive:
       os.kill(child_pid, signal.SIGKILL)
     self.assertFalse(alive, "the orphan outlived its parent")
+
+
+class WriteCsvTest(absltest.TestCase):
+
+  def test_round_trip_first_row_keys_no_temporaries(self):
+    tmp = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp.cleanup)
+    d = tmp.name
+    path = os.path.join(d, "rows.csv")
+    mpm_io.write_csv(path, [{"a": 1, "b": "x,y"}, {"a": 2.5, "b": "", "c": 9}])
+    with open(path, newline="") as f:
+      self.assertEqual(list(csv.DictReader(f)),
+                       [{"a": "1", "b": "x,y"}, {"a": "2.5", "b": ""}])
+    self.assertEqual(os.listdir(d), ["rows.csv"])
+    mpm_io.write_csv(os.path.join(d, "none.csv"), [])
+    self.assertEqual(os.listdir(d), ["rows.csv"])
 
 
 class FileErrorTest(absltest.TestCase):
