@@ -47,7 +47,8 @@ def main(argv):
   distributed.check_supported(_CONFIG.value, processes.num_processes)
   runtime.existing_dir("data", _DATA.value, holding="train.h5")
   runtime.writable("workdir", _WORKDIR.value)
-  distributed.check_reachable(processes, _COORDINATOR_WAIT_S.value)
+  distributed.handshake(processes, _COORDINATOR_WAIT_S.value,
+                        _INIT_TIMEOUT_S.value)
   runtime.enable_compilation_cache()
   distributed.initialize(processes, _INIT_TIMEOUT_S.value)
   from gnsjax import train  # pylint: disable=g-import-not-at-top

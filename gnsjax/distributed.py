@@ -5,16 +5,19 @@ command but their own ``process_id``; process 0 runs the coordinator at
 ``coordinator`` (host:port). ``settings`` reads the flags, else the
 variables a launcher sets (SLURM_NTASKS / SLURM_PROCID, or
 GNSJAX_NUM_PROCESSES / GNSJAX_PROCESS_ID / GNSJAX_COORDINATOR);
-``check_reachable`` tests the address with a plain TCP connect (with a
-short timeout: ``jax.distributed.initialize`` would otherwise wait minutes
-on a wrong one); ``initialize`` starts JAX's distributed runtime (CPU
-collectives over gloo) and checks that every process agrees on the count.
+``handshake`` checks, over a plain TCP connection to process 0 before
+JAX's runtime starts, that the address works and that every process was
+started with the same count and a distinct id (``jax.distributed.
+initialize`` would otherwise wait minutes, then fail without saying why);
+``initialize`` starts JAX's distributed runtime (CPU collectives over gloo)
+and checks the count again.
 
 Docs: docs/scaling.md.
 """
 
 import dataclasses
 import errno
+import json
 import os
 import socket
 import time
@@ -127,17 +130,159 @@ def parse_address(text: str) -> tuple[str, int]:
   return host, int(port)
 
 
-def check_reachable(s: Settings, wait_s: float = 60.0,
-                    connect_timeout_s: float = 2.0) -> None:
-  """Fails fast on a coordinator address that cannot work.
+# First line of every handshake message: a stranger on the port is refused.
+_HANDSHAKE = "gnsjax-handshake/1"
 
-  Process 0 will listen there, so it checks that the host is one of its
-  own addresses and the port is free; the others connect to it (TCP, a
-  ``connect_timeout_s`` timeout) until it answers or ``wait_s`` pass (the
-  processes need not start at the same moment).
+
+def _send(sock: socket.socket, message: dict) -> None:
+  sock.sendall((json.dumps(dict(message, protocol=_HANDSHAKE)) + "\n"
+                ).encode())
+
+
+def _receive(sock: socket.socket, timeout_s: float) -> dict | None:
+  """One JSON line from ``sock``; None if it is not a handshake message.
 
   Raises:
-    InputError: naming the address and what is wrong with it.
+    TimeoutError: no complete line within ``timeout_s``.
+  """
+  sock.settimeout(timeout_s)
+  data = b""
+  while not data.endswith(b"\n"):
+    chunk = sock.recv(4096)
+    if not chunk:
+      break
+    data += chunk
+    if len(data) > 65536:
+      return None
+  try:
+    message = json.loads(data.decode())
+  except (UnicodeDecodeError, json.JSONDecodeError):
+    return None
+  if not isinstance(message, dict) or message.get("protocol") != _HANDSHAKE:
+    return None
+  return message
+
+
+def _listen(s: Settings, family, address, flag: str) -> socket.socket:
+  sock = socket.socket(family, socket.SOCK_STREAM)
+  try:
+    sock.bind(address)
+  except OSError as e:
+    sock.close()
+    why = {errno.EADDRINUSE: "the port is in use",
+           errno.EADDRNOTAVAIL: f"{address[0]!r} is not an address of this "
+                                "host, but process 0 runs the coordinator"
+           }.get(e.errno, e.strerror)
+    raise InputError(f"{flag}: {why}; allowed: this host's name or address "
+                     "and a free port") from None
+  sock.listen(max(8, s.num_processes))
+  return sock
+
+
+def _gather(s: Settings, server: socket.socket, timeout_s: float) -> None:
+  """Process 0: a hello from every other process, then one answer to all.
+
+  Every process hears the same verdict: "ok", or the first mismatch found
+  (the moment it arrives, without waiting for the rest).
+  """
+  deadline = time.monotonic() + timeout_s
+  connections, ids = [], set()
+  error = None
+  try:
+    while len(ids) < s.num_processes - 1 and error is None:
+      left = deadline - time.monotonic()
+      if left <= 0:
+        missing = sorted(set(range(1, s.num_processes)) - ids)
+        error = (f"process(es) {missing} did not connect within "
+                 f"{timeout_s:g} s; allowed: every process started with "
+                 f"--num_processes={s.num_processes} and this --coordinator")
+        break
+      server.settimeout(left)
+      try:
+        conn, _ = server.accept()
+      except TimeoutError:
+        continue
+      try:
+        hello = _receive(conn, min(left, 10.0))
+      except OSError:
+        hello = None
+      if hello is None:
+        conn.close()  # not one of ours: ignore it
+        continue
+      connections.append(conn)
+      n, i = hello.get("num_processes"), hello.get("process_id")
+      if n != s.num_processes:
+        error = (f"process {i} was started with --num_processes={n}, "
+                 f"process 0 with --num_processes={s.num_processes}; "
+                 "allowed: the same --num_processes in every process")
+      elif i in ids or i == 0:
+        error = (f"two processes were started with --process_id={i}; "
+                 f"allowed: distinct ids 0..{s.num_processes - 1}")
+      ids.add(i)
+    for conn in connections:
+      try:
+        _send(conn, {"ok": error is None, "error": error})
+        # Wait for the peer to close first, so the port is left free of
+        # TIME_WAIT sockets for JAX's coordinator.
+        _receive(conn, 5.0)
+      except OSError:
+        pass
+  finally:
+    for conn in connections:
+      conn.close()
+  if error is not None:
+    raise InputError(f"--coordinator={s.coordinator}: {error}")
+
+
+def _hello(s: Settings, address, flag: str, wait_s: float,
+           connect_timeout_s: float, timeout_s: float) -> None:
+  """A process other than 0: connect (until ``wait_s`` pass), say who it
+  is, and wait for process 0's verdict."""
+  deadline = time.monotonic() + wait_s
+  while True:
+    try:
+      conn = socket.create_connection(address[:2], timeout=connect_timeout_s)
+      break
+    except OSError as e:
+      why = e.strerror or type(e).__name__
+    if time.monotonic() >= deadline:
+      raise InputError(
+          f"{flag}: nothing answers there after {wait_s:g} s ({why}); "
+          "allowed: the host:port where process 0 (started with "
+          "--process_id=0) runs")
+    time.sleep(min(1.0, connect_timeout_s))
+  with conn:
+    try:
+      _send(conn, {"num_processes": s.num_processes,
+                   "process_id": s.process_id})
+      verdict = _receive(conn, timeout_s)
+    except (TimeoutError, OSError) as e:
+      raise InputError(f"{flag}: process 0 gave no answer within "
+                       f"{timeout_s:g} s ({e}); allowed: every process "
+                       "started with the same --num_processes") from None
+  if verdict is None:
+    raise InputError(f"{flag}: something other than process 0 of this run "
+                     "answers there; allowed: the host:port where process 0 "
+                     "(started with --process_id=0) runs")
+  if not verdict.get("ok"):
+    raise InputError(f"{flag}: {verdict.get('error')}")
+
+
+def handshake(s: Settings, wait_s: float = 60.0, timeout_s: float = 300.0,
+              connect_timeout_s: float = 2.0) -> None:
+  """Fails fast, before JAX's runtime starts, on a run that cannot work.
+
+  Process 0 listens on the coordinator's address (so the host must be one
+  of its own and the port free) until every other process has said its
+  ``num_processes`` and ``process_id``; the others connect (retrying for
+  ``wait_s``: the processes need not start at the same moment) and wait
+  for the verdict. A mismatched process count or a duplicate id is named to
+  every process that connected as soon as it is seen; then the port is
+  given back and ``initialize`` may start the coordinator there. (JAX's own
+  runtime would wait its whole timeout, then fail without saying why.)
+
+  Raises:
+    InputError: naming the address and what is wrong.
   """
   if not s.multi:
     return
@@ -150,31 +295,10 @@ def check_reachable(s: Settings, wait_s: float = 60.0,
                      "allowed: process 0's host name or address") from None
   family, _, _, _, address = infos[0]
   if s.process_id == 0:
-    with socket.socket(family, socket.SOCK_STREAM) as sock:
-      try:
-        sock.bind(address)
-      except OSError as e:
-        why = {errno.EADDRINUSE: "the port is in use",
-               errno.EADDRNOTAVAIL: f"{host!r} is not an address of this "
-                                    "host, but process 0 runs the "
-                                    "coordinator"}.get(e.errno, e.strerror)
-        raise InputError(f"{flag}: {why}; allowed: this host's name or "
-                         "address and a free port") from None
-    return
-  deadline = time.monotonic() + wait_s
-  while True:
-    try:
-      with socket.create_connection(address[:2],
-                                    timeout=connect_timeout_s):
-        return
-    except OSError as e:
-      why = e.strerror or type(e).__name__
-    if time.monotonic() >= deadline:
-      raise InputError(
-          f"{flag}: nothing answers there after {wait_s:g} s ({why}); "
-          "allowed: the host:port where process 0 (started with "
-          "--process_id=0) runs")
-    time.sleep(min(1.0, connect_timeout_s))
+    with _listen(s, family, address, flag) as server:
+      _gather(s, server, timeout_s)
+  else:
+    _hello(s, address, flag, wait_s, connect_timeout_s, timeout_s)
 
 
 def initialize(s: Settings, timeout_s: int = 300) -> None:

@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 
 from absl.testing import absltest
@@ -181,34 +182,29 @@ class SettingsTest(parameterized.TestCase):
     s = distributed.Settings("no-such-host.invalid:1234", 2, 1)
     with self.assertRaisesRegex(distributed.InputError,
                                 "cannot resolve host 'no-such-host.invalid'"):
-      distributed.check_reachable(s)
+      distributed.handshake(s)
 
   def test_nothing_listening_fails_after_the_wait(self):
     s = distributed.Settings(f"127.0.0.1:{_free_port()}", 2, 1)
     start = time.monotonic()
     with self.assertRaisesRegex(distributed.InputError,
                                 "nothing answers there after 0.3 s"):
-      distributed.check_reachable(s, wait_s=0.3, connect_timeout_s=0.1)
+      distributed.handshake(s, wait_s=0.3, connect_timeout_s=0.1)
     self.assertLess(time.monotonic() - start, 5)
 
-  def test_a_listening_coordinator_is_reachable(self):
-    with socket.socket() as server:
-      server.bind(("127.0.0.1", 0))
-      server.listen()
-      port = server.getsockname()[1]
-      distributed.check_reachable(
-          distributed.Settings(f"127.0.0.1:{port}", 2, 1), wait_s=1)
-      # Process 0 must listen there itself: a taken port is refused.
+  def test_process_0_needs_a_free_port_of_its_host(self):
+    with socket.socket() as taken:
+      taken.bind(("127.0.0.1", 0))
+      taken.listen()
+      port = taken.getsockname()[1]
       with self.assertRaisesRegex(distributed.InputError,
                                   "the port is in use"):
-        distributed.check_reachable(
-            distributed.Settings(f"127.0.0.1:{port}", 2, 0))
-
-  def test_process_0_needs_an_address_of_its_host(self):
+        distributed.handshake(distributed.Settings(f"127.0.0.1:{port}", 2, 0))
     s = distributed.Settings("192.0.2.1:12355", 2, 0)  # TEST-NET-1
     with self.assertRaisesRegex(distributed.InputError,
                                 "not an address of this host"):
-      distributed.check_reachable(s)
+      distributed.handshake(s)
+
 
   def test_unsupported_configs_are_refused(self):
     config = fixtures.tiny_config(batch_size=2)
@@ -226,6 +222,115 @@ class SettingsTest(parameterized.TestCase):
     with self.assertRaisesRegex(distributed.InputError,
                                 "on-device windows run on one process"):
       distributed.check_supported(config, 2)
+
+def _handshakes(counts_and_ids, timeout_s=30.0):
+  """Runs ``handshake`` for (num_processes, process_id) pairs at once (the
+  first is process 0); returns each one's error text (None: passed) and the
+  seconds until the last one ended."""
+  port = _free_port()
+  results = [None] * len(counts_and_ids)
+
+  def one(k, n, i):
+    try:
+      distributed.handshake(
+          distributed.Settings(f"127.0.0.1:{port}", n, i), wait_s=10,
+          timeout_s=timeout_s, connect_timeout_s=0.2)
+    except distributed.InputError as e:
+      results[k] = str(e)
+
+  start = time.monotonic()
+  threads = [threading.Thread(target=one, args=(k, n, i))
+             for k, (n, i) in enumerate(counts_and_ids)]
+  for t in threads:
+    t.start()
+  for t in threads:
+    t.join(60)
+  return results, time.monotonic() - start, port
+
+
+class HandshakeTest(absltest.TestCase):
+  """Process 0 and the others agree on the run before JAX's runtime starts
+  (threads on localhost stand in for processes)."""
+
+  def test_agreeing_processes_pass_and_leave_the_port_free(self):
+    results, _, port = _handshakes([(3, 0), (3, 1), (3, 2)])
+    self.assertEqual(results, [None, None, None])
+    with socket.socket() as s:  # JAX's coordinator can listen there now
+      s.bind(("127.0.0.1", port))
+
+  def test_mismatched_process_counts_fail_fast_everywhere(self):
+    for counts in ([(2, 0), (3, 1)], [(3, 0), (2, 1)]):
+      results, seconds, _ = _handshakes(counts)
+      self.assertLess(seconds, 10, "waited for a timeout")
+      for text in results:
+        self.assertIn(f"process 1 was started with --num_processes="
+                      f"{counts[1][0]}, process 0 with --num_processes="
+                      f"{counts[0][0]}", text)
+        self.assertIn("allowed: the same --num_processes", text)
+
+  def test_duplicate_ids_fail(self):
+    results, seconds, _ = _handshakes([(3, 0), (3, 1), (3, 1)])
+    self.assertLess(seconds, 10)
+    for text in results:
+      self.assertIn("two processes were started with --process_id=1", text)
+
+  def test_a_missing_process_is_named_after_the_timeout(self):
+    results, _, _ = _handshakes([(3, 0), (3, 2)], timeout_s=0.5)
+    self.assertIn("process(es) [1] did not connect within 0.5 s", results[0])
+    self.assertIn("process(es) [1] did not connect", results[1])
+
+  def test_a_stranger_on_the_port_is_ignored(self):
+    port = _free_port()
+    errors = []
+
+    def process_0():
+      try:
+        distributed.handshake(distributed.Settings(f"127.0.0.1:{port}", 2, 0),
+                              timeout_s=20)
+      except distributed.InputError as e:
+        errors.append(str(e))
+
+    thread = threading.Thread(target=process_0)
+    thread.start()
+    deadline = time.monotonic() + 10
+    while True:
+      try:
+        stranger = socket.create_connection(("127.0.0.1", port), timeout=1)
+        break
+      except OSError:
+        self.assertLess(time.monotonic(), deadline)
+        time.sleep(0.05)
+    with stranger:
+      stranger.sendall(b"GET / HTTP/1.0\r\n\r\n")
+    distributed.handshake(distributed.Settings(f"127.0.0.1:{port}", 2, 1),
+                          wait_s=5)
+    thread.join(30)
+    self.assertEqual(errors, [])
+
+
+class EntryPointTest(fixtures.TinyRunTestCase):
+
+  def test_mismatched_process_count_fails_fast_and_writes_nothing(self):
+    port = _free_port()
+    workdir = os.path.join(self.dir, "run")
+    env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
+               GNSJAX_CACHE_DIR=CACHE)
+    # A batch that splits over 2 and over 3 processes: only the count is
+    # wrong.
+    procs = [subprocess.Popen(
+        _train_argv(self.data, workdir, 2) + [
+            "--config.train.batch_size=6", f"--coordinator=127.0.0.1:{port}",
+            f"--num_processes={n}", f"--process_id={i}"],
+        env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        text=True) for n, i in ((2, 0), (3, 1))]
+    for p in procs:
+      self.addCleanup(p.kill)
+    outputs = [p.communicate(timeout=120)[0] for p in procs]
+    self.assertEqual([p.returncode for p in procs], [2, 2], outputs)
+    for out in outputs:
+      self.assertIn("process 1 was started with --num_processes=3, process "
+                    "0 with --num_processes=2", out)
+    self.assertFalse(os.path.exists(workdir))
 
 
 if __name__ == "__main__":
