@@ -24,14 +24,26 @@ from gnsjax import simulator
 from mpm import io as mpm_io
 
 
+# Model settings added after models were shipped, with the value that
+# reproduces a checkpoint written before them.
+MODEL_DEFAULTS = {"smooth_cutoff": 0.0}
+
+
+def model_config_dict(model_config) -> dict:
+  """The model section as a dict, settings a checkpoint predates filled in."""
+  return {**MODEL_DEFAULTS, **dict(model_config)}
+
+
 def create_model(model_config: ml_collections.ConfigDict
                  ) -> models.EncodeProcessDecode:
+  model_config = model_config_dict(model_config)
   return models.EncodeProcessDecode(
-      latent_size=model_config.latent_size,
-      hidden_layers=model_config.hidden_layers,
-      num_message_passing_steps=model_config.num_message_passing_steps,
-      type_embedding_size=model_config.type_embedding_size,
-      split_first_layer=model_config.split_first_layer)
+      latent_size=model_config["latent_size"],
+      hidden_layers=model_config["hidden_layers"],
+      num_message_passing_steps=model_config["num_message_passing_steps"],
+      type_embedding_size=model_config["type_embedding_size"],
+      split_first_layer=model_config["split_first_layer"],
+      smooth_cutoff=float(model_config["smooth_cutoff"]))
 
 
 @dataclasses.dataclass(frozen=True)

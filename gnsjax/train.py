@@ -95,13 +95,15 @@ def create_optimizer(train_config) -> optax.GradientTransformation:
 CONFIG_KEYS = {
     "model": ("latent_size", "hidden_layers", "num_message_passing_steps",
               "type_embedding_size", "split_first_layer",
-              "connectivity_radius", "boundary_particles", "sdf_spacing"),
+              "connectivity_radius", "boundary_particles", "sdf_spacing",
+              "smooth_cutoff"),
     "train": ("seed", "batch_size", "num_steps", "input_frames",
               "frame_stride", "noise_std", "noise_velocity_fraction",
               "fold_noise", "motion_weighting", "pushforward_steps",
               "pushforward_probability", "lr_init", "lr_min",
               "lr_decay_steps", "clip_norm", "node_bucket",
-              "capacity_multiplier", "max_wall_time_s", "device_windows"),
+              "capacity_multiplier", "max_wall_time_s", "device_windows",
+              "init_from"),
     "checkpoint": ("every_steps", "named_steps", "keep"),
     "eval": ("every_steps", "num_windows", "rollout_steps", "num_rollouts"),
 }
@@ -139,6 +141,10 @@ def check_config(config) -> None:
                      f"{config.train.pushforward_steps}, pushforward_"
                      f"probability = {config.train.pushforward_probability}; "
                      "allowed: steps >= 0, probability 0 to 1")
+  if not 0.0 <= config.model.smooth_cutoff <= 1.0:
+    raise InputError(f"config.model.smooth_cutoff = "
+                     f"{config.model.smooth_cutoff}; allowed: 0 (off) to 1 "
+                     "(a fraction of the connectivity radius)")
   if not 0.0 <= config.train.motion_weighting <= 1.0:
     raise InputError(f"config.train.motion_weighting = "
                      f"{config.train.motion_weighting}; allowed: 0 to 1")
@@ -158,7 +164,8 @@ _TRAIN_PHYSICS = ("input_frames", "frame_stride")
 def check_compatible(stored: dict, config) -> None:
   """Refuses to resume a run whose model or data physics differ."""
   current = _config_dict(config)
-  pairs = [("model", stored.get("model"), current.get("model"))] + [
+  pairs = [("model", run_lib.model_config_dict(stored.get("model", {})),
+            run_lib.model_config_dict(current.get("model", {})))] + [
       (f"train.{k}", stored.get("train", {}).get(k),
        current.get("train", {}).get(k)) for k in _TRAIN_PHYSICS] + [
       (f"dataset.{k}", stored.get("dataset", {}).get(k),
@@ -169,6 +176,24 @@ def check_compatible(stored: dict, config) -> None:
           f"the checkpoint was trained with another config: its '{where}' is "
           f"{old}, this config has {new}; use a new --workdir or the same "
           "config")
+
+
+def check_fine_tuning(stored: dict, config) -> None:
+  """Refuses to start from a checkpoint of another architecture or physics.
+
+  The model may differ in ``smooth_cutoff`` only (it adds no parameter);
+  the data and the inputs (``train.input_frames``, ``frame_stride``) must
+  be the same.
+  """
+  old = run_lib.model_config_dict(stored.get("model", {}))
+  new = run_lib.model_config_dict(_config_dict(config)["model"])
+  old["smooth_cutoff"] = new["smooth_cutoff"]
+  compatible = dict(stored, model=old)
+  try:
+    check_compatible(compatible, config)
+  except InputError as e:
+    raise InputError(f"config.train.init_from = {config.train.init_from!r}: "
+                     f"{e}") from None
 
 
 def _mesh():
@@ -493,12 +518,21 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   if mngr.latest_step() is not None:
     check_compatible(checkpoint.read_config(mngr, mngr.latest_step()), config)
     stored = checkpoint.read_stats(mngr, mngr.latest_step())
+  start_from = None
+  if stored is None and tcfg.init_from:
+    start_from = run_lib.load_run(tcfg.init_from)
+    check_fine_tuning(start_from.config.to_dict(), config)
+    stored = start_from.problem.to_dict()
   # A resumed (or fine-tuned) model keeps the statistics it was trained with.
   problem = (problem_from_dict(config, stored) if stored is not None else
              load_problem(data_dir, config))
   trainer = Trainer(config, problem)
   state = trainer.init_state(tcfg.seed)
-  if stored is not None:
+  if start_from is not None:
+    state = trainer.replicate(state.replace(params=start_from.params))
+    logging.info("fine-tuning from %s, step %d", tcfg.init_from,
+                 start_from.step)
+  elif stored is not None:
     state, _, _ = checkpoint.restore(mngr, state)
     trainer.restore_graph_capacities(
         checkpoint.read_graph_capacities(mngr, int(state.step)))

@@ -23,6 +23,9 @@ def get_config() -> ml_collections.ConfigDict:
   config.model.num_message_passing_steps = 10
   config.model.type_embedding_size = 16
   config.model.split_first_layer = True
+  # Messages taper to zero over this fraction of R before the cutoff, so the
+  # model is a continuous function of the positions (gnsjax.models); 0: off.
+  config.model.smooth_cutoff = 0.0
   # None: the dataset's connectivity radius.
   config.model.connectivity_radius = ml_collections.FieldReference(
       None, field_type=float)
@@ -57,6 +60,9 @@ def get_config() -> ml_collections.ConfigDict:
   # (batching.DeviceWindows) instead of reading them on the host; needs
   # model.boundary_particles = False.
   config.train.device_windows = False
+  # Fine-tuning: a run directory whose latest checkpoint's parameters (and
+  # statistics) a new run starts from, at step 0; '': random initialisation.
+  config.train.init_from = ""
   # Stop (with a checkpoint) after this much training time (s); 0: never.
   config.train.max_wall_time_s = 0.0
   config.train.lr_init = 1e-4

@@ -90,6 +90,60 @@ class ModelTest(parameterized.TestCase):
     np.testing.assert_allclose(out_padded, out, atol=1e-6)
 
 
+class SmoothCutoffTest(absltest.TestCase):
+  """Messages that vanish at R make the model continuous in the positions."""
+
+  def _receiver_output(self, model, params, distance):
+    # Two nodes; node 1 sends to node 0 at ``distance`` (units of R), and
+    # each has its self-edge. Edges longer than R are not in the graph.
+    nf, pt, _, _, _ = _inputs(5, n=2, e=1)
+    s = [0, 1] + ([1] if distance < 1 else [])
+    ef = [[0, 0, 0], [0, 0, 0]] + ([[distance, 0, distance]]
+                                   if distance < 1 else [])
+    return model.apply(params, nf, pt, jnp.asarray(ef, jnp.float32),
+                       jnp.asarray(s, jnp.int32),
+                       jnp.asarray([0, 1, 0][:len(s)], jnp.int32))[0]
+
+  def test_weight_by_hand(self):
+    d = jnp.array([0.0, 0.4, 0.5, 0.75, 1.0, 1.3])
+    np.testing.assert_allclose(models.cutoff_weight(d, 0.5),
+                               [1, 1, 1, 0.5, 0, 0], atol=1e-6)
+    slope = jax.vmap(jax.grad(lambda x: models.cutoff_weight(x, 0.5)))(d)
+    np.testing.assert_allclose(slope[np.array([0, 2, 4, 5])], 0, atol=1e-6)
+    np.testing.assert_allclose(slope[3], -np.pi, rtol=1e-5)
+
+  def test_an_edge_enters_at_zero_weight(self):
+    args = _inputs(6, n=2, e=3)
+    jumps = {}
+    for taper in (0.0, 0.5):
+      model = models.EncodeProcessDecode(
+          latent_size=16, num_message_passing_steps=2, smooth_cutoff=taper)
+      params = model.init(jax.random.key(0), *args)
+      inside = self._receiver_output(model, params, 1 - 1e-4)
+      outside = self._receiver_output(model, params, 1 + 1e-4)
+      jumps[taper] = float(jnp.max(jnp.abs(inside - outside)))
+    # Without the taper the edge's message appears at full size.
+    self.assertGreater(jumps[0.0], 1e-2)
+    self.assertLess(jumps[0.5], 1e-5)
+
+  def test_inner_edges_are_untouched(self):
+    # Every edge shorter than (1 - taper) R: equal to the hard cutoff.
+    nf, pt, ef, s, r = _inputs(7)
+    ef = ef.at[:, 2].set(jnp.abs(ef[:, 2]) % 0.5)
+    hard, smooth = (models.EncodeProcessDecode(
+        latent_size=16, num_message_passing_steps=2, smooth_cutoff=t)
+                    for t in (0.0, 0.5))
+    params = hard.init(jax.random.key(0), nf, pt, ef, s, r)
+    np.testing.assert_allclose(smooth.apply(params, nf, pt, ef, s, r),
+                               hard.apply(params, nf, pt, ef, s, r),
+                               atol=1e-6)
+
+  def test_bad_taper(self):
+    model = models.EncodeProcessDecode(latent_size=8, smooth_cutoff=1.5)
+    with self.assertRaisesRegex(ValueError, "smooth_cutoff = 1.5; allowed"):
+      model.init(jax.random.key(0), *_inputs(n=4, e=4))
+
+
 class FeaturesTest(absltest.TestCase):
 
   def setUp(self):

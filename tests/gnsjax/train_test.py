@@ -18,6 +18,7 @@ from gnsjax import checkpoint
 from gnsjax import data
 from gnsjax import features
 from gnsjax import rollout
+from gnsjax import run as run_lib
 from gnsjax import simulator
 from gnsjax import train
 from mpm import geometry
@@ -203,6 +204,41 @@ class TrainTest(fixtures.TinyRunTestCase):
     with self.assertRaisesRegex(mpm_io.FormatError,
                                 "no normalisation statistics"):
       train.train_and_evaluate(config, nostats, os.path.join(self.dir, "x"))
+
+
+  def test_fine_tuning_starts_from_the_checkpoint(self):
+    base = os.path.join(self.dir, "base")
+    config = fixtures.tiny_config(num_steps=3)
+    config.checkpoint.every_steps = 3
+    train.train_and_evaluate(config, self.data, base)
+    tuned = os.path.join(self.dir, "tuned")
+    fine = fixtures.tiny_config(num_steps=1, init_from=base, lr_init=0.0,
+                                lr_min=0.0)
+    fine.model.smooth_cutoff = 0.5
+    fine.checkpoint.every_steps = 1
+    train.train_and_evaluate(fine, self.data, tuned)
+    got, want = run_lib.load_run(tuned), run_lib.load_run(base)
+    self.assertEqual((got.step, got.model.smooth_cutoff), (1, 0.5))
+    # A zero learning rate: the parameters are the checkpoint's, unchanged.
+    jax.tree.map(np.testing.assert_array_equal, got.params, want.params)
+    assert_same_problem(self, got.problem, want.problem)
+    other = fixtures.tiny_config(num_steps=1, init_from=base)
+    other.model.latent_size = 8
+    with self.assertRaisesRegex(mpm.InputError, "init_from = .*'model'"):
+      train.train_and_evaluate(other, self.data,
+                               os.path.join(self.dir, "other"))
+
+  def test_checkpoints_before_smooth_cutoff_resume(self):
+    # A run whose stored config predates the setting resumes (as 0, off).
+    config = fixtures.tiny_config(num_steps=2)
+    config.checkpoint.every_steps = 2
+    train.train_and_evaluate(config, self.data, self.dir)
+    mngr = checkpoint.manager(self.dir, 2)
+    stored = checkpoint.read_config(mngr, 2)
+    mngr.close()
+    del stored["model"]["smooth_cutoff"]
+    train.check_compatible(stored, config)
+    self.assertEqual(run_lib.create_model(stored["model"]).smooth_cutoff, 0)
 
 
 class ProblemTest(absltest.TestCase):
