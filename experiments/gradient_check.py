@@ -1,14 +1,17 @@
-"""Plain against smoothed gradients over a whole avalanche, through the MPM.
+"""Plain against smoothed gradients over a whole avalanche.
 
   python -m experiments.gradient_check --out=docs/results/gradient_check \\
       [--sigma=0.05 --num_samples=16 --xs=0.6,0.8,1.0,1.2] \\
-      [--objective=passed_fraction --x_protect=0.4]
+      [--objective=passed_fraction --x_protect=0.4] \\
+      [--simulator=gns --workdir=experiments/pretrained/small --hs=0.01,0.001]
 
 On the inverse-design study's scene (the small config's heap, 250 particles,
 a semicircle of radius 0.04 m, 600 frames), at each obstacle x: the slope of
-the objective over x +- sigma (two MPM runs) against jax.grad at x and the
-smoothed gradients (``gnsjax.design.smoothing``). Writes ``rows.csv``,
-``summary.json`` and ``report.md`` (docs/inverse_design.md).
+the objective over x +- sigma (two runs) and central differences at each of
+--hs against jax.grad at x and the smoothed gradients
+(``gnsjax.design.smoothing``), through the MPM or a trained learned
+simulator. Writes ``rows.csv``, ``summary.json`` and ``report.md``
+(docs/inverse_design.md).
 """
 
 import os
@@ -36,9 +39,15 @@ _X_PROTECT = flags.DEFINE_float("x_protect", 0.4, "passed_fraction's line "
 _TARGET_X = flags.DEFINE_float("target_x", 0.6, "centroid's target (m).")
 _FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per rollout.",
                                lower_bound=2)
+_SIMULATOR = flags.DEFINE_enum("simulator", "mpm", ["mpm", "gns"],
+                               "Whose gradients are checked.")
+_WORKDIR = flags.DEFINE_string(
+    "workdir", "experiments/pretrained/small",
+    "The trained learned simulator (--simulator=gns).")
+_HS = flags.DEFINE_list("hs", [], "Steps (m) of extra central differences.")
 
 
-def _check_inputs() -> list[float]:
+def _check_inputs() -> tuple[list[float], list[float]]:
   try:
     xs = [float(x) for x in _XS.value]
   except ValueError as e:
@@ -51,16 +60,46 @@ def _check_inputs() -> list[float]:
     raise runtime.InputError(
         f"--xs: {bad} with --sigma={sigma:g}: x +- sigma must lie in "
         f"[{lo:g}, {hi:g}] m")
+  try:
+    hs = [float(h) for h in _HS.value]
+  except ValueError as e:
+    raise runtime.InputError(f"--hs={','.join(_HS.value)}: expected "
+                             "comma-separated steps (m)") from e
+  if any(not h > 0 for h in hs):
+    raise runtime.InputError(f"--hs={','.join(_HS.value)}: allowed: steps "
+                             "> 0 (m)")
+  bad = [x for x in xs if not lo <= x - max(hs, default=0) <= x + max(
+      hs, default=0) <= hi]
+  if bad:
+    raise runtime.InputError(f"--xs: {bad} with --hs: x +- h must lie in "
+                             f"[{lo:g}, {hi:g}] m")
+  if _SIMULATOR.value == "gns":
+    runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
   if _SAMPLES.value % 2:
     raise runtime.InputError(f"--num_samples={_SAMPLES.value}: allowed: an "
                              "even number >= 2 (antithetic pairs)")
   runtime.writable("out", _OUT.value)
-  return xs
+  return xs, hs
+
+
+def _driver(scene):
+  # pylint: disable=g-import-not-at-top
+  from gnsjax import run as run_lib
+  from gnsjax.design import gradient_check
+  from gnsjax.design import placement
+  from gnsjax.design import rollouts
+  if _SIMULATOR.value == "mpm":
+    return gradient_check.mpm_driver(scene)
+  run = run_lib.load_run(_WORKDIR.value)
+  window = rollouts.mpm_window(scene, run.problem.input_frames,
+                               run.problem.frame_stride)
+  return rollouts.GNSDriver(rollouts.GNSRollout.create(
+      placement.Placement(scene), run.model, run.problem, window), run.params)
 
 
 def main(argv):
   del argv
-  xs = _check_inputs()
+  xs, hs = _check_inputs()
   runtime.enable_compilation_cache()
   # pylint: disable=g-import-not-at-top
   from experiments import evaluation
@@ -69,17 +108,20 @@ def main(argv):
   objective = objectives.make(_OBJECTIVE.value, x_protect=_X_PROTECT.value,
                               target_x=_TARGET_X.value)
   scene = tasks.design_scene(num_frames=_FRAMES.value)
-  rows = gradient_check.check(scene, objective, xs, sigma=_SIGMA.value,
-                              num_samples=_SAMPLES.value)
+  rows = gradient_check.check(_driver(scene), objective, xs,
+                              sigma=_SIGMA.value, num_samples=_SAMPLES.value,
+                              hs=hs)
   os.makedirs(_OUT.value, exist_ok=True)
   evaluation.write_csv(os.path.join(_OUT.value, "rows.csv"), rows)
   mpm_io.write_json(os.path.join(_OUT.value, "summary.json"), {
       "scene": scene.to_dict(), "objective": _OBJECTIVE.value,
       "x_protect": _X_PROTECT.value, "target_x": _TARGET_X.value,
+      "simulator": _SIMULATOR.value,
+      "workdir": _WORKDIR.value if _SIMULATOR.value == "gns" else None,
       "rows": rows})
   text = gradient_check.report(
-      rows, f"Gradient check: {_OBJECTIVE.value}, {scene.name}, "
-      f"{_FRAMES.value} frames")
+      rows, f"Gradient check ({_SIMULATOR.value.upper()}): "
+      f"{_OBJECTIVE.value}, {scene.name}, {_FRAMES.value} frames")
   mpm_io.write_text(os.path.join(_OUT.value, "report.md"), text)
   print(text)
 

@@ -93,8 +93,8 @@ _PROBLEM = flags.DEFINE_enum(
 _METHOD = flags.DEFINE_list(
     "method", ["adam"],
     "One or more (comma-separated) of: adam (plain gradients), "
-    "adam_smoothed (gradients of the objective smoothed at --sigma; MPM "
-    "only), cmaes, random, sweep (baselines, batched MPM).")
+    "adam_smoothed (gradients of the objective smoothed at --sigma), "
+    "cmaes, random, sweep (baselines, batched MPM).")
 _BUDGET_S = flags.DEFINE_float(
     "budget_s", None, "Wall-time budget (s) per method, after compilation.")
 _BUDGET_EVALS = flags.DEFINE_integer(
@@ -270,9 +270,6 @@ def _check_inputs() -> None:
     runtime.writable("out", _OUT.value)
     return
   if _METHOD.value == ["adam_smoothed"]:
-    if _SIMULATOR.value != "mpm":
-      raise runtime.InputError("--method=adam_smoothed runs on the MPM; "
-                               "allowed: --simulator=mpm")
     if _SAMPLES.value % 2:
       raise runtime.InputError(f"--num_samples={_SAMPLES.value}; allowed: "
                                "an even number >= 2 (antithetic pairs)")

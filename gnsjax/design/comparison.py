@@ -6,7 +6,7 @@ budget (wall time and/or evaluations), every design judged by the MPM:
 - ``adam``: projected Adam on the plain pathwise gradient of the smooth
   objective (``optimize.optimise``);
 - ``adam_smoothed``: projected Adam on the score-function gradient of the
-  objective smoothed at ``sigma`` (``smoothing.SmoothedMPMDriver``);
+  objective smoothed at ``sigma`` (``smoothing.SmoothedDriver``);
 - ``cmaes``, ``random``, ``sweep``: ``baselines``, batched (one vmapped MPM
   program per batch of designs).
 
@@ -109,7 +109,7 @@ def run_method(method: str, placement: placement_lib.AnyPlacement,
     driver = rollouts.MPMDriver(sim)
     if method == "adam_smoothed":
       scale = step_scale(placement, start)
-      driver = smoothing.SmoothedMPMDriver(
+      driver = smoothing.SmoothedDriver(
           driver, sigma=jax.tree.map(lambda c: sigma * c, scale),
           num_samples=num_samples, estimator="score", seed=seed)
     t = time.perf_counter()

@@ -1,7 +1,8 @@
 """Which gradient predicts the objective's change at a scale sigma?
 
-At each obstacle position x of a scene, through the MPM over the whole
-rollout, ``check`` compares with the slope of the objective between
+At each obstacle position x of a scene, through the MPM or the learned
+simulator over the whole rollout, ``check`` compares with the slope of the
+objective between
 x - sigma and x + sigma (two forward runs, what a sweep at spacing 2 sigma
 sees):
 
@@ -28,30 +29,44 @@ from gnsjax.design import rollouts
 from gnsjax.design import smoothing
 
 
-def check(scene: mpm.Scene, objective: objectives.Objective,
-          xs: Sequence[float], *, sigma: float, num_samples: int,
+def mpm_driver(scene: mpm.Scene) -> rollouts.MPMDriver:
+  """The MPM as a function of the first obstacle's x (``Placement``)."""
+  return rollouts.MPMDriver(rollouts.MPMRollout.create(
+      placement_lib.Placement(scene)))
+
+
+def check(driver, objective: objectives.Objective, xs: Sequence[float], *,
+          sigma: float, num_samples: int, hs: Sequence[float] = (),
           seed: int = 0, log: Callable[[str], None] = print) -> list[dict]:
   """One row per x: the slope over [x - sigma, x + sigma] of the smooth and
-  the plain objective, and the three gradients (with standard errors and
-  seconds; the first of each kind includes compilation).
+  the plain objective, central differences of the smooth objective at each
+  h in ``hs``, and the three gradients (with standard errors and seconds;
+  the first of each kind includes compilation).
 
   Args:
-    scene: its first obstacle is moved (``Placement``).
+    driver: ``mpm_driver(scene)`` or a ``rollouts.GNSDriver``; its
+      placement moves the scene's first obstacle.
     objective: ``objectives.make(...)``; gradients are of ``smooth``.
-    xs: obstacle positions (m), each with x +- sigma in the allowed range.
+    xs: obstacle positions (m), each with x +- sigma (and +- h) in the
+      allowed range.
     sigma: the scale (m).
     num_samples: perturbed designs per smoothed gradient (even).
+    hs: steps (m) of extra central differences: as h shrinks they tend to
+      the derivative where the rollout is continuous, and grow like
+      (jump / h) where it jumps.
   """
-  placement = placement_lib.Placement(scene)
-  lo, hi = placement.x_range
+  lo, hi = driver.placement.x_range
+  reach = max([sigma, *hs])
   for x in xs:
-    if not (lo <= x - sigma and x + sigma <= hi):
+    if not (lo <= x - reach and x + reach <= hi):
       raise ValueError(f"x = {x:g} m: x +- sigma = {sigma:g} m must lie in "
                        f"the allowed range [{lo:g}, {hi:g}] m")
-  sim = rollouts.MPMRollout.create(placement)
-  driver = rollouts.MPMDriver(sim)
   smooth = objective.smooth
   rows = []
+
+  def smooth_at(x):
+    return float(smooth(jnp.asarray(driver.rollout({"x": jnp.float32(x)}))))
+
   for i, x in enumerate(xs):
     params = {"x": jnp.float32(x)}
     row = {"x": float(x), "sigma": sigma, "num_samples": num_samples}
@@ -62,14 +77,17 @@ def check(scene: mpm.Scene, objective: objectives.Objective,
                    objective.plain(positions)))
     row["slope_smooth"] = (ends[1][0] - ends[0][0]) / (2 * sigma)
     row["slope_plain"] = (ends[1][1] - ends[0][1]) / (2 * sigma)
+    for h in hs:
+      row[f"difference_h{h:g}"] = (smooth_at(x + h) - smooth_at(x - h)) / (
+          2 * h)
     start = time.perf_counter()
     _, grad, _ = driver.value_and_grad(smooth, params)
     row["pathwise"] = float(grad["x"])
     row["pathwise_s"] = time.perf_counter() - start
     for estimator in smoothing.ESTIMATORS:
       start = time.perf_counter()
-      _, grad, stderr = smoothing.mpm_smoothed_value_and_grad(
-          sim, smooth, params, jax.random.key(seed + i), sigma=sigma,
+      _, grad, stderr = smoothing.driver_smoothed_value_and_grad(
+          driver, smooth, params, jax.random.key(seed + i), sigma=sigma,
           num_samples=num_samples, estimator=estimator)
       row[f"smoothed_{estimator}"] = float(grad["x"])
       row[f"smoothed_{estimator}_stderr"] = float(stderr["x"])
@@ -81,15 +99,20 @@ def check(scene: mpm.Scene, objective: objectives.Objective,
 
 def report(rows: Sequence[dict], title: str) -> str:
   """A Markdown table of ``check``'s rows and the sign agreements."""
+  hs = [k for k in rows[0] if k.startswith("difference_h")]
   lines = [f"# {title}", "",
-           "| x (m) | slope over x +- sigma (smooth / plain) | jax.grad | "
-           "smoothed, pathwise | smoothed, score | seconds (grad / pathwise "
-           "/ score) |", "|---|---|---|---|---|---|"]
+           "| x (m) | slope over x +- sigma (smooth / plain) | " +
+           "".join(f"differences, h = {k[len('difference_h'):]} m | "
+                   for k in hs) +
+           "jax.grad | smoothed, pathwise | smoothed, score | seconds (grad "
+           "/ pathwise / score) |", "|---|---|" + "---|" * len(hs) +
+           "---|---|---|---|"]
   agree = {k: 0 for k in ("pathwise", "smoothed_pathwise", "smoothed_score")}
   for r in rows:
     lines.append(
         f"| {r['x']:.2f} | {r['slope_smooth']:.3g} / {r['slope_plain']:.3g} "
-        f"| {r['pathwise']:.3g} | {r['smoothed_pathwise']:.3g} +- "
+        "| " + "".join(f"{r[k]:.3g} | " for k in hs) +
+        f"{r['pathwise']:.3g} | {r['smoothed_pathwise']:.3g} +- "
         f"{r['smoothed_pathwise_stderr']:.2g} | {r['smoothed_score']:.3g} +- "
         f"{r['smoothed_score_stderr']:.2g} | {r['pathwise_s']:.1f} / "
         f"{r['smoothed_pathwise_s']:.1f} / {r['smoothed_score_s']:.1f} |")

@@ -81,8 +81,7 @@ def smoothed_value_and_grad(fn: Callable[[Params], jax.Array], params: Params,
     its standard error from the spread of the pairs' estimates), the last
     two as pytrees like ``params``.
   """
-  if estimator not in ESTIMATORS:
-    raise ValueError(f"estimator = {estimator!r}; allowed: {ESTIMATORS}")
+  _check_estimator(estimator)
   flat, unravel = flatten_util.ravel_pytree(params)
   scale = _flat_sigma(sigma, params, flat)
   eps = perturbations(key, params, num_samples)
@@ -90,16 +89,30 @@ def smoothed_value_and_grad(fn: Callable[[Params], jax.Array], params: Params,
   flat_fn = lambda theta: fn(unravel(theta))
   if estimator == "pathwise":
     values, grads = jax.vmap(jax.value_and_grad(flat_fn))(thetas)
-    pairs = jnp.mean(grads.reshape(-1, 2, flat.size), axis=1)   # [S/2, P]
   else:
-    values = jax.vmap(flat_fn)(thetas)
+    values, grads = jax.vmap(flat_fn)(thetas), None
+  value, grad, stderr = _estimate(values, grads, eps, scale)
+  return value, unravel(grad), unravel(stderr)
+
+
+def _check_estimator(estimator: str) -> None:
+  if estimator not in ESTIMATORS:
+    raise ValueError(f"estimator = {estimator!r}; allowed: {ESTIMATORS}")
+
+
+def _estimate(values, grads, eps, scale):
+  """(mean value, gradient, standard error) [P] from the values [S] (and,
+  pathwise, the gradients [S, P]) at the designs theta + scale * eps."""
+  if grads is not None:
+    pairs = jnp.mean(grads.reshape(-1, 2, eps.shape[1]), axis=1)  # [S/2, P]
+  else:
     # Antithetic pairs: (f(+) - f(-)) / 2 per pair, times its direction.
     v = values.reshape(-1, 2)
     pairs = ((v[:, 0] - v[:, 1]) / 2)[:, None] * eps[::2] / scale[None]
   grad = jnp.mean(pairs, axis=0)
   stderr = jnp.std(pairs, axis=0, ddof=1) / jnp.sqrt(pairs.shape[0]) \
       if pairs.shape[0] > 1 else jnp.full_like(grad, jnp.nan)
-  return jnp.mean(values), unravel(grad), unravel(stderr)
+  return jnp.mean(values), grad, stderr
 
 
 def _flat_sigma(sigma, params: Params, flat: jax.Array) -> jax.Array:
@@ -154,19 +167,77 @@ def mpm_smoothed_value_and_grad(sim: rollouts.MPMRollout, objective,
   return float(value), grad, stderr
 
 
-class SmoothedMPMDriver:
-  """An ``MPMDriver`` whose gradients are smoothed (for ``optimize.optimise``).
+def driver_smoothed_value_and_grad(driver, objective, params: Params,
+                                   key: jax.Array, *, sigma,
+                                   num_samples: int = 16,
+                                   estimator: str = "pathwise"
+                                   ) -> tuple[float, Params, Params]:
+  """``smoothed_value_and_grad`` through a driver: an ``MPMDriver``'s designs
+  as one batch (``mpm_smoothed_value_and_grad``), any other's
+  (``rollouts.GNSDriver``) one at a time (``looped_smoothed_value_and_grad``).
+  """
+  if isinstance(driver, rollouts.MPMDriver):
+    return mpm_smoothed_value_and_grad(
+        driver.sim, objective, params, key, sigma=sigma,
+        num_samples=num_samples, estimator=estimator)
+  return looped_smoothed_value_and_grad(
+      driver, objective, params, key, sigma=sigma, num_samples=num_samples,
+      estimator=estimator)
+
+
+def looped_smoothed_value_and_grad(driver, objective, params: Params,
+                                   key: jax.Array, *, sigma,
+                                   num_samples: int = 16,
+                                   estimator: str = "pathwise"
+                                   ) -> tuple[float, Params, Params]:
+  """``smoothed_value_and_grad`` through any driver, one perturbed design at
+  a time on the host.
+
+  The same perturbations, projection and estimates as the batched MPM
+  version; the learned simulator's driver keeps a neighbour list on the
+  host (grown on overflow), so its designs run one after another.
+
+  Raises:
+    FloatingPointError: a value or gradient that is not finite.
+  """
+  _check_estimator(estimator)
+  placement = driver.placement
+  placement.check(params)
+  flat, unravel = flatten_util.ravel_pytree(params)
+  scale = _flat_sigma(sigma, params, flat)
+  eps = perturbations(key, params, num_samples)
+  values, grads = [], []
+  for theta in np.asarray(flat[None] + scale[None] * eps):
+    # The projection's derivative (zero across a bound) as in the batch.
+    p, pullback = jax.vjp(placement.project, unravel(jnp.asarray(theta)))
+    if estimator == "pathwise":
+      value, grad, _ = driver.value_and_grad(objective, p)
+      grads.append(flatten_util.ravel_pytree(pullback(grad)[0])[0])
+    else:
+      value = float(objective(jnp.asarray(driver.rollout(p))))
+    values.append(value)
+  value, grad, stderr = _estimate(jnp.asarray(values),
+                                  jnp.stack(grads) if grads else None, eps,
+                                  scale)
+  if not (np.isfinite(value) and rollouts.all_finite(grad)):
+    raise FloatingPointError(
+        f"{placement.scene.name}: the smoothed ({estimator}) objective or its "
+        f"gradient at {jax.tree.map(np.asarray, params)} is not finite")
+  return float(value), unravel(grad), unravel(stderr)
+
+
+class SmoothedDriver:
+  """A driver whose gradients are smoothed (for ``optimize.optimise``).
 
   ``value_and_grad`` returns the smoothed objective F_sigma and its
-  estimated gradient; each call draws new perturbations (the key is the
-  seed folded with the call count, so a run is reproducible).
+  estimated gradient (``driver_smoothed_value_and_grad``: the MPM's designs
+  batched, the GNS's one at a time); each call draws new perturbations (the
+  key is the seed folded with the call count, so a run is reproducible).
   """
 
-  def __init__(self, driver: rollouts.MPMDriver, *, sigma,
-               num_samples: int = 16, estimator: str = "score",
-               seed: int = 0):
-    if estimator not in ESTIMATORS:
-      raise ValueError(f"estimator = {estimator!r}; allowed: {ESTIMATORS}")
+  def __init__(self, driver, *, sigma, num_samples: int = 16,
+               estimator: str = "score", seed: int = 0):
+    _check_estimator(estimator)
     check_num_samples(num_samples)
     self.driver, self.sigma = driver, sigma
     self.num_samples, self.estimator = num_samples, estimator
@@ -184,7 +255,7 @@ class SmoothedMPMDriver:
     """(F_sigma, its gradient estimate, positions [T, N, 2] at ``params``)."""
     key = jax.random.fold_in(self._key, self._calls)
     self._calls += 1
-    value, grad, _ = mpm_smoothed_value_and_grad(
-        self.driver.sim, objective, params, key, sigma=self.sigma,
+    value, grad, _ = driver_smoothed_value_and_grad(
+        self.driver, objective, params, key, sigma=self.sigma,
         num_samples=self.num_samples, estimator=self.estimator)
     return value, grad, self.driver.rollout(params)

@@ -214,9 +214,9 @@ ROWS = (
      ["--out={d}/out", "--method=adam,nope", "--budget_s=10"],
      "--method=adam,nope: allowed: one or more distinct of adam, "
      "adam_smoothed, cmaes, random, sweep"),
-    ("inverse_design_smoothed_gns", "experiments.inverse_design",
-     ["--out={d}/out", "--method=adam_smoothed"],
-     "--method=adam_smoothed runs on the MPM; allowed: --simulator=mpm"),
+    ("inverse_design_odd_samples", "experiments.inverse_design",
+     ["--out={d}/out", "--method=adam_smoothed", "--num_samples=3"],
+     "--num_samples=3; allowed: an even number >= 2"),
     ("gradient_check_xs", "experiments.gradient_check",
      ["--out={d}/out", "--xs=0.52"],
      "--xs: [0.52] with --sigma=0.05: x +- sigma must lie in [0.5, 1.3] m"),

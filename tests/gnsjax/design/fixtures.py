@@ -29,12 +29,14 @@ def scene(**overrides) -> mpm.Scene:
 
 def tiny_gns(placement: placement_lib.Placement, num_frames: int,
              window: np.ndarray | None = None, frame_stride: int = 1,
-             boundary: bool = True) -> rollouts.GNSDriver:
+             boundary: bool = True,
+             smooth_cutoff: float = 0.0) -> rollouts.GNSDriver:
   """A GNS driver of an untrained two-step model (random weights); the
   window is the MPM's unless given."""
   model = models.EncodeProcessDecode(latent_size=16, hidden_layers=1,
                                      num_message_passing_steps=2,
-                                     type_embedding_size=4)
+                                     type_embedding_size=4,
+                                     smooth_cutoff=smooth_cutoff)
   params = models.init_params(model, jax.random.key(0),
                               features.num_node_features(C))
   bounds = ((0.0, 1.65), (0.0, 1.19))

@@ -136,8 +136,8 @@ class MPMSmoothingTest(absltest.TestCase):
                                rtol=0.05)
 
   def test_adam_on_smoothed_gradients(self):
-    driver = smoothing.SmoothedMPMDriver(rollouts.MPMDriver(self.sim),
-                                         sigma=0.01, num_samples=2)
+    driver = smoothing.SmoothedDriver(rollouts.MPMDriver(self.sim),
+                                      sigma=0.01, num_samples=2)
     history = optimize.optimise(driver, self.objective, {"x": jnp.float32(X)},
                                 steps=2, learning_rate=0.01)
     self.assertLen(history, 2)
@@ -146,10 +146,27 @@ class MPMSmoothingTest(absltest.TestCase):
       self.assertTrue(np.isfinite(r["objective"]) and np.isfinite(r["grad_x"]))
       self.assertBetween(r["x"], lo, hi)
     # Each call draws new perturbations (reproducibly from the seed).
-    again = smoothing.SmoothedMPMDriver(rollouts.MPMDriver(self.sim),
-                                        sigma=0.01, num_samples=2)
+    again = smoothing.SmoothedDriver(rollouts.MPMDriver(self.sim),
+                                     sigma=0.01, num_samples=2)
     first = again.value_and_grad(self.objective, {"x": jnp.float32(X)})
     self.assertEqual(first[0], history[0]["objective"])
+
+  def test_one_design_at_a_time_equals_the_batch(self):
+    # The host loop (what the GNS's driver uses) and the vmapped MPM
+    # program: the same designs, the same estimates.
+    driver = rollouts.MPMDriver(self.sim)
+    params = {"x": jnp.float32(X)}
+    for estimator in smoothing.ESTIMATORS:
+      batched = smoothing.mpm_smoothed_value_and_grad(
+          self.sim, self.objective, params, KEY, sigma=0.01, num_samples=4,
+          estimator=estimator)
+      looped = smoothing.looped_smoothed_value_and_grad(
+          driver, self.objective, params, KEY, sigma=0.01, num_samples=4,
+          estimator=estimator)
+      np.testing.assert_allclose(looped[0], batched[0], rtol=1e-5)
+      for got, want in zip(looped[1:], batched[1:]):
+        np.testing.assert_allclose(float(got["x"]), float(want["x"]),
+                                   rtol=1e-3, atol=1e-6)
 
   def test_perturbed_designs_stay_in_range_at_the_edge(self):
     # At the top of the allowed range half the perturbed designs would leave
@@ -177,11 +194,15 @@ class GradientCheckTest(absltest.TestCase):
     self.assertIn("pathwise 1/2, smoothed_pathwise 2/2, smoothed_score 0/2",
                   text)
     self.assertIn("| 1.00 | 0.3 / 0.25 | -5.8 | 0.2 +- 0.1 |", text)
+    text = gradient_check.report([{**row, "difference_h0.001": 1.5}], "t")
+    self.assertIn("| differences, h = 0.001 m | jax.grad |", text)
+    self.assertIn("| 1.00 | 0.3 / 0.25 | 1.5 | -5.8 |", text)
 
   def test_positions_whose_interval_leaves_the_range_are_refused(self):
     with self.assertRaisesRegex(ValueError, r"x = 1.28 m: x \+- sigma"):
-      gradient_check.check(scene(), objectives.make("runout"), [1.28],
-                           sigma=0.05, num_samples=2)
+      gradient_check.check(gradient_check.mpm_driver(scene()),
+                           objectives.make("runout"), [1.28], sigma=0.05,
+                           num_samples=2)
 
 
 if __name__ == "__main__":
