@@ -139,7 +139,8 @@ def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
 
 
 def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
-                   objective: str, simulator: str, out: str) -> str:
+                   objective: str, simulator: str, out: str,
+                   smoothed: bool = False) -> str:
   """Writes a PNG of the smooth objective against the obstacle's x.
 
   Args:
@@ -149,6 +150,7 @@ def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
     objective: its name (the y label).
     simulator: whose gradients the optimiser followed.
     out: the PNG's path.
+    smoothed: whether they were smoothed (``method="adam_smoothed"``).
 
   Returns:
     The path written.
@@ -160,7 +162,8 @@ def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
               [r["smooth"] for r in sweep[name]], style, ms=4,
               label=f"{name.upper()} sweep")
   ax.plot([r["x"] for r in history], [r["objective"] for r in history],
-          "r.--", label=f"Adam on {simulator.upper()} gradients")
+          "r.--", label=f"Adam on {'smoothed ' if smoothed else ''}"
+          f"{simulator.upper()} gradients")
   ax.plot(history[0]["x"], history[0]["objective"], "r^", ms=8,
           label="start")
   ax.set_xlabel("obstacle x (m)")

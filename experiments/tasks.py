@@ -310,7 +310,8 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
       num_samples=num_samples, estimator=estimator,
       log=lambda line: tqdm.tqdm.write(line))
   figures.objective_vs_x(result.sweep, result.history, obj.name, simulator,
-                         os.path.join(out_dir, "objective_vs_x.png"))
+                         os.path.join(out_dir, "objective_vs_x.png"),
+                         smoothed=method == "adam_smoothed")
   return result.summary
 
 

@@ -23,10 +23,12 @@ antithetic pairs (eps, -eps), which cancel the odd part of the noise:
 
 ``sigma`` is the user's scale, in the parameters' units (m for positions and
 sizes): a scalar, or one value per parameter (a pytree like ``params``).
-The samples are vmapped, so one compiled program evaluates them all (the
-MPM batches well). Perturbed designs outside the allowed ranges are the
-caller's concern: ``mpm_smoothed_value_and_grad`` projects them onto the
-placement's ranges (the projection's derivative is zero outside).
+Through the MPM the samples are vmapped, so one compiled program evaluates
+them all (the MPM batches well); through the learned simulator
+(``looped_smoothed_value_and_grad``) they run one at a time. Perturbed
+designs outside the allowed ranges are the caller's concern: the drivers'
+versions project them onto the placement's ranges (the projection's
+derivative is zero outside).
 """
 
 import functools
