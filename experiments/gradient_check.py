@@ -53,13 +53,6 @@ def _check_inputs() -> tuple[list[float], list[float]]:
   except ValueError as e:
     raise runtime.InputError(f"--xs={','.join(_XS.value)}: expected "
                              "comma-separated positions (m)") from e
-  lo, hi = sampler.OBSTACLE_X_RANGE
-  sigma = _SIGMA.value
-  bad = [x for x in xs if not lo <= x - sigma <= x + sigma <= hi]
-  if bad:
-    raise runtime.InputError(
-        f"--xs: {bad} with --sigma={sigma:g}: x +- sigma must lie in "
-        f"[{lo:g}, {hi:g}] m")
   try:
     hs = [float(h) for h in _HS.value]
   except ValueError as e:
@@ -68,11 +61,14 @@ def _check_inputs() -> tuple[list[float], list[float]]:
   if any(not h > 0 for h in hs):
     raise runtime.InputError(f"--hs={','.join(_HS.value)}: allowed: steps "
                              "> 0 (m)")
-  bad = [x for x in xs if not lo <= x - max(hs, default=0) <= x + max(
-      hs, default=0) <= hi]
-  if bad:
-    raise runtime.InputError(f"--xs: {bad} with --hs: x +- h must lie in "
-                             f"[{lo:g}, {hi:g}] m")
+  lo, hi = sampler.OBSTACLE_X_RANGE
+  for flag, name, reach in ((f"--sigma={_SIGMA.value:g}", "sigma",
+                             _SIGMA.value),
+                            ("--hs", "h", max(hs, default=0.0))):
+    bad = [x for x in xs if not lo <= x - reach <= x + reach <= hi]
+    if bad:
+      raise runtime.InputError(f"--xs: {bad} with {flag}: x +- {name} must "
+                               f"lie in [{lo:g}, {hi:g}] m")
   if _SIMULATOR.value == "gns":
     runtime.existing_dir("workdir", _WORKDIR.value, holding="checkpoints")
   if _SAMPLES.value % 2:
@@ -84,17 +80,12 @@ def _check_inputs() -> tuple[list[float], list[float]]:
 
 def _driver(scene):
   # pylint: disable=g-import-not-at-top
-  from gnsjax import run as run_lib
   from gnsjax.design import gradient_check
   from gnsjax.design import placement
-  from gnsjax.design import rollouts
+  from gnsjax.design import study
   if _SIMULATOR.value == "mpm":
     return gradient_check.mpm_driver(scene)
-  run = run_lib.load_run(_WORKDIR.value)
-  window = rollouts.mpm_window(scene, run.problem.input_frames,
-                               run.problem.frame_stride)
-  return rollouts.GNSDriver(rollouts.GNSRollout.create(
-      placement.Placement(scene), run.model, run.problem, window), run.params)
+  return study.gns_driver(placement.Placement(scene), _WORKDIR.value)
 
 
 def main(argv):

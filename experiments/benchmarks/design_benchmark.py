@@ -40,6 +40,7 @@ from gnsjax import features
 from gnsjax import models
 from gnsjax import train
 from gnsjax.design import objectives
+from gnsjax.design import study
 
 GB = 1024**3
 RATIO_TARGET = 4.0
@@ -212,15 +213,9 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
                       objective, frames, frames, repeats, log, remat=False))
   rows.append(measure("MPM, paper scene", mpm_driver(paper), objective,
                       frames, frames, repeats, log))
-  run = train.load_run(tasks.PRETRAINED)
-  placement = design.Placement(small)
-  window = design.mpm_window(small, run.problem.input_frames,
-                             run.problem.frame_stride)
   rows.append(measure(
       "GNS small model, small scene",
-      design.GNSDriver(design.GNSRollout.create(placement, run.model,
-                                                run.problem, window),
-                       run.params),
+      study.gns_driver(design.Placement(small), tasks.PRETRAINED),
       objective, frames, frames, repeats, log))
   placement = design.Placement(paper)
   model, params, problem = paper_gns(placement)

@@ -162,11 +162,16 @@ def mpm_smoothed_value_and_grad(sim: rollouts.MPMRollout, objective,
   _flat_sigma(sigma, params, flatten_util.ravel_pytree(params)[0])
   value, grad, stderr = _mpm_smoothed(sim, params, key, sigma, objective,
                                       num_samples, estimator)
+  _check_finite(sim.placement, estimator, params, value, grad)
+  return float(value), grad, stderr
+
+
+def _check_finite(placement, estimator: str, params: Params, value,
+                  grad) -> None:
   if not (np.isfinite(value) and rollouts.all_finite(grad)):
     raise FloatingPointError(
-        f"{sim.placement.scene.name}: the smoothed ({estimator}) objective or "
-        f"its gradient at {jax.tree.map(np.asarray, params)} is not finite")
-  return float(value), grad, stderr
+        f"{placement.scene.name}: the smoothed ({estimator}) objective or its "
+        f"gradient at {jax.tree.map(np.asarray, params)} is not finite")
 
 
 def driver_smoothed_value_and_grad(driver, objective, params: Params,
@@ -221,10 +226,7 @@ def looped_smoothed_value_and_grad(driver, objective, params: Params,
   value, grad, stderr = _estimate(jnp.asarray(values),
                                   jnp.stack(grads) if grads else None, eps,
                                   scale)
-  if not (np.isfinite(value) and rollouts.all_finite(grad)):
-    raise FloatingPointError(
-        f"{placement.scene.name}: the smoothed ({estimator}) objective or its "
-        f"gradient at {jax.tree.map(np.asarray, params)} is not finite")
+  _check_finite(placement, estimator, params, value, grad)
   return float(value), unravel(grad), unravel(stderr)
 
 

@@ -44,6 +44,19 @@ class StudyResult(NamedTuple):
   sweep: dict[str, list[dict]]
 
 
+def gns_driver(placement: placement_lib.Placement,
+               workdir: str) -> rollouts.GNSDriver:
+  """The trained learned simulator in ``workdir`` (a run directory or a
+  shipped model, latest checkpoint) as a function of ``placement``, started
+  from the MPM's first input frames of its scene."""
+  run = train.load_run(workdir)
+  window = rollouts.mpm_window(placement.scene, run.problem.input_frames,
+                               run.problem.frame_stride)
+  return rollouts.GNSDriver(
+      rollouts.GNSRollout.create(placement, run.model, run.problem, window),
+      run.params)
+
+
 def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
           simulator: str = "gns", workdir: str | None = None,
           steps: int = 8, learning_rate: float = 0.05,
@@ -75,12 +88,7 @@ def study(out_dir: str, scene: mpm.Scene, objective: objectives.Objective, *,
       scene, free=("x", "size") if optimise_size else ("x",))
   sims = {"mpm": rollouts.MPMDriver(rollouts.MPMRollout.create(placement))}
   if workdir is not None:
-    run = train.load_run(workdir)
-    window = rollouts.mpm_window(scene, run.problem.input_frames,
-                                 run.problem.frame_stride)
-    sims["gns"] = rollouts.GNSDriver(
-        rollouts.GNSRollout.create(placement, run.model, run.problem, window),
-        run.params)
+    sims["gns"] = gns_driver(placement, workdir)
   if simulator not in sims:
     raise ValueError("simulator='gns' needs the trained model's workdir")
   if method not in METHODS:
