@@ -132,6 +132,8 @@ def parse_address(text: str) -> tuple[str, int]:
 
 # First line of every handshake message: a stranger on the port is refused.
 _HANDSHAKE = "gnsjax-handshake/1"
+# How much longer than process 0 the others wait for its verdict (s).
+_VERDICT_MARGIN_S = 10.0
 
 
 def _send(sock: socket.socket, message: dict) -> None:
@@ -255,11 +257,14 @@ def _hello(s: Settings, address, flag: str, wait_s: float,
     try:
       _send(conn, {"num_processes": s.num_processes,
                    "process_id": s.process_id})
-      verdict = _receive(conn, timeout_s)
+      # Longer than process 0's own timeout, so that its verdict (which
+      # names a missing process) arrives before this process gives up.
+      verdict = _receive(conn, timeout_s + _VERDICT_MARGIN_S)
     except (TimeoutError, OSError) as e:
       raise InputError(f"{flag}: process 0 gave no answer within "
-                       f"{timeout_s:g} s ({e}); allowed: every process "
-                       "started with the same --num_processes") from None
+                       f"{timeout_s + _VERDICT_MARGIN_S:g} s ({e}); allowed: "
+                       "every process started with the same "
+                       "--num_processes") from None
   if verdict is None:
     raise InputError(f"{flag}: something other than process 0 of this run "
                      "answers there; allowed: the host:port where process 0 "
