@@ -54,6 +54,8 @@ _PARKING_SPACING = 2.5
 _PARKING_TOLERANCE = 1e-3
 # Margin of the search box around the domain, in radii.
 _MARGIN = 2.0
+# Rollout lists' capacities are rounded up to rungs ceil(r^k) (``rounded_up``).
+_CAPACITY_RATIO = 2 ** 0.25
 # The elementwise maximum of some integers over the processes that each hold
 # part of a batch (gnsjax.distributed.agree_max).
 Agree = Callable[[Sequence[int]], Sequence[int]]
@@ -317,6 +319,53 @@ def _with_capacity(nbrs: partition.NeighborList, capacity: int,
   idx = jnp.pad(nbrs.idx, pad, constant_values=n)
   return dataclasses.replace(nbrs, idx=idx, max_occupancy=capacity,
                              cell_list_capacity=cell_capacity)
+
+
+def _ladder(c: int) -> int:
+  """The smallest rung ceil(r^k) >= c of the ladder r = _CAPACITY_RATIO."""
+  k = max(0, math.floor(math.log(max(c, 1), _CAPACITY_RATIO)) - 1)
+  while math.ceil(_CAPACITY_RATIO ** k) < c:
+    k += 1
+  return math.ceil(_CAPACITY_RATIO ** k)
+
+
+def rounded_up(nbrs: partition.NeighborList,
+               at_least: partition.NeighborList | None = None
+               ) -> partition.NeighborList:
+  """The list with its edge and cell capacities rounded up to a ladder.
+
+  Capacities are static shapes, so every size a process meets is compiled
+  anew, and XLA:CPU keeps each compiled program's code mapped until the
+  process ends: a rollout that reallocated to the exact size it needed
+  compiled a program per reallocation, and an evaluation of 21 test
+  trajectories ran out of memory maps (about 700 per program, 65530 per
+  process) and crashed. On rungs ceil(1.19^k) (at most 19% headroom beyond
+  ``capacity_multiplier``) the sizes of all scenes of one particle count fall
+  on a few rungs. The edges are unchanged: only padding is added.
+
+  Args:
+    nbrs: a list from ``allocate`` or ``allocate_batch``.
+    at_least: a list whose capacities the result must not go below (the one
+      being replaced), or None.
+
+  Returns:
+    The list, idx padded with N to the rounded edge capacity; the edge
+    capacity never exceeds the candidates an update produces (N^2, or
+    N 3^d times the cell capacity), so updates keep its shapes.
+  """
+  n = nbrs.reference_position.shape[-2]
+  capacity, cell = capacities(nbrs)
+  if at_least is not None:
+    old_capacity, old_cell = capacities(at_least)
+    capacity = max(capacity, old_capacity)
+    if cell is not None and old_cell is not None:
+      cell = max(cell, old_cell)
+  if cell is not None:
+    cell = _ladder(cell)
+  limit = n * n if cell is None else min(
+      n * n, n * 3 ** nbrs.reference_position.shape[-1] * cell)
+  return _with_capacity(nbrs, max(capacity, min(_ladder(capacity), limit)),
+                        cell)
 
 
 def capacities(nbrs: partition.NeighborList) -> tuple[int, int | None]:

@@ -10,7 +10,8 @@ The drivers (``rollout``, ``rollout_batch``) run ``unroll`` in chunks of a
 fixed number of steps, so one compiled program serves any length. If the
 neighbour list overflows at step k, steps k and later of that chunk are
 discarded; the host reallocates a larger list from the last good positions
-and resumes from step k. The result therefore equals a rollout that had
+and resumes from step k. Capacities are rounded up to a ladder of sizes
+(``graph.rounded_up``), so the compiled programs are few. The result therefore equals a rollout that had
 enough capacity from the start (tested).
 
 ``rollout_batch`` runs B scenes at once: each is padded to the largest node
@@ -145,7 +146,9 @@ def _run_chunks(scan: Callable, allocate: Callable, window: np.ndarray, nbrs,
 
   Args:
     scan: (window, nbrs) -> ``unroll``'s outputs, everything else bound.
-    allocate: last frame -> a neighbour list sized for it.
+    allocate: last frame -> a neighbour list sized for it; a reallocation
+      rounds it up (``graph.rounded_up``), never below the list it replaces,
+      so a process compiles few programs however many scenes it rolls out.
     window: [C, ...] float32 input frames, time first.
     nbrs: the initial neighbour list.
     n_steps: T; chunk: steps per scan.
@@ -180,7 +183,8 @@ def _run_chunks(scan: Callable, allocate: Callable, window: np.ndarray, nbrs,
                            "after its reallocation")
       if on_reallocate is not None:
         on_reallocate(done)
-      nbrs = allocate(jnp.asarray(window[-1]))
+      nbrs = graph.rounded_up(allocate(jnp.asarray(window[-1])),
+                              at_least=nbrs)
       rewound = True
     else:
       nbrs = new_nbrs
@@ -236,7 +240,7 @@ def rollout(predictor, params, scene: SceneNodes, n_steps: int,
   window, types, moving, solids = _check_scene(scene, "rollout")
   allocate = functools.partial(graph.allocate, spec)
   if nbrs is None:
-    nbrs = allocate(jnp.asarray(window[-1]))
+    nbrs = graph.rounded_up(allocate(jnp.asarray(window[-1])))
   scan = functools.partial(
       _unroll, predictor, params, types=jnp.asarray(types),
       moving=jnp.asarray(moving), solids=jax.tree.map(jnp.asarray, solids),
@@ -307,7 +311,7 @@ def rollout_batch(predictor, params, scenes: Sequence[SceneNodes],
       values=jnp.asarray(np.stack([sc.solids.values for sc in scenes])))
   allocate = functools.partial(graph.allocate_batch, spec)
   if nbrs is None:
-    nbrs = allocate(jnp.asarray(window[-1]))
+    nbrs = graph.rounded_up(allocate(jnp.asarray(window[-1])))
   scan = functools.partial(
       _unroll, predictor, params, types=jnp.asarray(np.stack(padded_t)),
       moving=jnp.asarray(np.stack(padded_m)), solids=solids, context=context,

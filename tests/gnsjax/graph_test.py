@@ -191,6 +191,37 @@ class GraphTest(absltest.TestCase):
       self.assertEqual(_edge_set(*graph.edges(again, N), N),
                        graph.brute_force_edges(x, RADIUS))
 
+  def test_rounded_up_capacities_are_few_and_keep_every_edge(self):
+    # Twelve scenes of one density: exact allocations differ in size, the
+    # rounded ones share a rung or two, never smaller; an update at the
+    # rounded sizes finds every edge.
+    rng = np.random.default_rng(7)
+    exact, rounded = set(), set()
+    for _ in range(12):
+      x = _window(60)
+      x[:N_REAL] = 0.1 + (x[:N_REAL] - 0.1) * 0.5
+      x[:N_REAL] += rng.uniform(-5e-3, 5e-3, (N_REAL, 2))
+      fresh = graph.allocate(SPEC, x)
+      up = graph.rounded_up(fresh)
+      exact.add(graph.capacities(fresh)[0])
+      rounded.add(graph.capacities(up))
+      self.assertGreaterEqual(up.max_occupancy, fresh.max_occupancy)
+      self.assertLessEqual(up.max_occupancy, 1.2 * fresh.max_occupancy + 1)
+      self.assertGreaterEqual(up.cell_list_capacity, fresh.cell_list_capacity)
+      updated = _update_jit(SPEC, x, up)
+      self.assertFalse(bool(updated.did_buffer_overflow))
+      self.assertEqual(updated.idx.shape, up.idx.shape)
+      self.assertEqual(_edge_set(*graph.edges(updated, N), N),
+                       graph.brute_force_edges(x, RADIUS))
+    self.assertGreaterEqual(len(exact), 6)
+    self.assertLessEqual(len(rounded), 3, rounded)
+    # Never below the list being replaced.
+    dense = x.copy()
+    dense[:N_REAL] = 0.1 + (dense[:N_REAL] - 0.1) * 0.2
+    big = graph.rounded_up(graph.allocate(SPEC, dense))
+    small = graph.rounded_up(graph.allocate(SPEC, x), at_least=big)
+    self.assertEqual(graph.capacities(small), graph.capacities(big))
+
   def test_batch_matches_per_window_graphs(self):
     n_batch = 3
     x = np.stack([_window(10 + b) for b in range(n_batch)])
