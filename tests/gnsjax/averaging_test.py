@@ -1,0 +1,95 @@
+"""Tests for `gnsjax.averaging` (model soups)."""
+
+import json
+import os
+
+from absl.testing import absltest
+import jax
+import numpy as np
+
+import mpm
+from gnsjax import averaging
+from gnsjax import run as run_lib
+from gnsjax import train
+from tests.gnsjax import fixtures
+
+
+class AverageParamsTest(absltest.TestCase):
+
+  def test_weighted_mean_leaf_by_leaf(self):
+    a = {"w": np.array([[1.0, 2.0]], np.float32), "b": np.array([4.0])}
+    b = {"w": np.array([[3.0, -2.0]], np.float32), "b": np.array([0.0])}
+    got = averaging.average_params([a, b], [0.25, 0.75])
+    np.testing.assert_allclose(got["w"], [[2.5, -1.0]])
+    np.testing.assert_allclose(got["b"], [1.0])
+    self.assertEqual(got["w"].dtype, np.float32)
+    one = averaging.average_params([a, b], [1.0, 0.0])
+    jax.tree.map(np.testing.assert_array_equal, one, a)
+
+  def test_bad_weights_are_refused(self):
+    a = {"w": np.zeros(2)}
+    for weights, message in (([0.5, 0.4], "sum to 1"),
+                             ([1.5, -0.5], ">= 0"),
+                             ([1.0], "1 weights for 2 runs"),
+                             ([float("nan"), 1.0], "finite")):
+      with self.assertRaisesRegex(mpm.InputError, message):
+        averaging.average_params([a, a], weights)
+
+
+class WriteAverageTest(fixtures.TinyRunTestCase):
+
+  def setUp(self):
+    super().setUp()
+    self.base = os.path.join(self.dir, "base")
+    config = fixtures.tiny_config(num_steps=3)
+    config.checkpoint.every_steps = 3
+    train.train_and_evaluate(config, self.data, self.base)
+    self.tuned = os.path.join(self.dir, "tuned")
+    fine = fixtures.tiny_config(num_steps=2, init_from=self.base,
+                                lr_init=1e-2)
+    fine.checkpoint.every_steps = 2
+    train.train_and_evaluate(fine, self.data, self.tuned)
+
+  def test_the_average_is_a_run_that_loads_and_resumes(self):
+    out = os.path.join(self.dir, "soup")
+    got = averaging.write_average([self.base, self.tuned], [0.5, 0.5], out)
+    base, tuned = run_lib.load_run(self.base), run_lib.load_run(self.tuned)
+    # The runs differ (the mean is not vacuous) and the mean is by hand.
+    self.assertFalse(all(jax.tree.leaves(jax.tree.map(
+        np.array_equal, base.params, tuned.params))))
+    jax.tree.map(lambda g, a, b: np.testing.assert_allclose(
+        g, 0.5 * (np.asarray(a) + np.asarray(b)), rtol=1e-6, atol=1e-7),
+                 got.params, base.params, tuned.params)
+    self.assertEqual(got.step, tuned.step)
+    self.assertEqual(got.problem.to_dict(), tuned.problem.to_dict())
+    with open(os.path.join(out, averaging.RECORD)) as f:
+      record = json.load(f)
+    self.assertEqual(record["weights"], [0.5, 0.5])
+    self.assertEqual([s["step"] for s in record["sources"]], [3, 2])
+    # Training resumes from it: the last run's optimiser, averaged weights.
+    more = fixtures.tiny_config(num_steps=3, init_from=self.base,
+                                lr_init=1e-2)
+    more.checkpoint.every_steps = 1
+    train.train_and_evaluate(more, self.data, out)
+    self.assertEqual(run_lib.load_run(out).step, 3)
+
+  def test_runs_that_do_not_fit_together_are_refused(self):
+    other = os.path.join(self.dir, "other")
+    config = fixtures.tiny_config(num_steps=1)
+    config.model.latent_size = 8
+    config.checkpoint.every_steps = 1
+    train.train_and_evaluate(config, self.data, other)
+    with self.assertRaisesRegex(mpm.InputError, "model.latent_size is 8"):
+      averaging.write_average([self.base, other], [0.5, 0.5],
+                              os.path.join(self.dir, "bad"))
+    with self.assertRaisesRegex(mpm.InputError, "two or more runs"):
+      averaging.write_average([self.base], [1.0],
+                              os.path.join(self.dir, "bad"))
+    with self.assertRaisesRegex(mpm.InputError, "already holds checkpoints"):
+      averaging.write_average([self.base, self.tuned], [0.5, 0.5],
+                              self.tuned)
+    self.assertFalse(os.path.exists(os.path.join(self.dir, "bad")))
+
+
+if __name__ == "__main__":
+  absltest.main()
