@@ -132,6 +132,9 @@ def demo_config(num_train: int, num_test: int, steps: int,
   config.dataset.num_train = num_train
   config.dataset.num_test = num_test
   config.train.num_steps = steps
+  # A constant small rate, whatever step the shipped model stopped at: a
+  # short fine-tuning on a few scenes should adjust it, not retrain it.
+  config.train.lr_init = config.train.lr_min = 1.5e-5
   config.checkpoint.every_steps = 100
   config.checkpoint.named_steps = ()
   config.eval.every_steps = 0
