@@ -88,6 +88,8 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
       "inside_solids": metrics.inside_solids(pred, scene),
       "outside_domain": metrics.outside_domain(pred, scene),
       "mpm_inside_solids": metrics.inside_solids(truth, scene),
+      "final_speed": metrics.final_speed(pred, frames * scene.frame_dt),
+      "mpm_final_speed": metrics.final_speed(truth, frames * scene.frame_dt),
       "pushed_fraction": out.pushed / n,
       "pushed_depth": out.depth,
   }
@@ -170,6 +172,8 @@ def per_trajectory_row(r: dict) -> dict:
       "mpm_max_inside_solids": float(np.max(r["mpm_inside_solids"])),
       "mean_pushed_fraction": float(np.mean(r["pushed_fraction"])),
       "max_pushed_depth": float(np.max(r["pushed_depth"])),
+      "final_speed": r["final_speed"],
+      "mpm_final_speed": r["mpm_final_speed"],
   }
   if "free_inside_solids" in r:
     row.update(
@@ -201,6 +205,8 @@ def group_summary(rows: Sequence[dict]) -> list[dict]:
         "max_outside_domain": float(np.max(col("max_outside_domain"))),
         "mean_pushed_fraction": float(np.mean(col("mean_pushed_fraction"))),
         "max_pushed_depth": float(np.max(col("max_pushed_depth"))),
+        "median_final_speed": float(np.median(col("final_speed"))),
+        "median_mpm_final_speed": float(np.median(col("mpm_final_speed"))),
     }
     if len(col("free_max_inside_solids")):
       entry["free_max_inside_solids"] = float(np.max(
@@ -356,10 +362,13 @@ def report(summary: dict, rows: Sequence[dict]) -> str:
       "rollout of the same model without the solid constraint. Pushed: mean "
       "fraction of the sand the constraint moved per step, and the deepest "
       "push. Front error: |front_GNS - front_MPM| at the last frame over the "
-      "MPM's runout distance (median).", "",
+      "MPM's runout distance (median). Speed at the end: the sand's mean "
+      "speed over the last 5 steps, GNS / MPM (median): a deposit that "
+      "jitters instead of resting shows here.", "",
       "| group | n | mean MSE (m^2) | const. vel. | front error | deposit "
       "error (m) | inside | outside | free: inside | pushed/step | deepest "
-      "push (m) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+      "push (m) | speed at end (cm/s) |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in summary["groups"]:
     lines.append(
         f"| {g['group']} | {g['trajectories']} | {g['mean_mse']:.2e} | "
@@ -368,7 +377,9 @@ def report(summary: dict, rows: Sequence[dict]) -> str:
         f"{g['median_deposit_error']:.4f} | {g['max_inside_solids']:.1%} | "
         f"{g['max_outside_domain']:.1%} | "
         f"{g.get('free_max_inside_solids', float('nan')):.1%} | "
-        f"{g['mean_pushed_fraction']:.2%} | {g['max_pushed_depth']:.4f} |")
+        f"{g['mean_pushed_fraction']:.2%} | {g['max_pushed_depth']:.4f} | "
+        f"{100 * g['median_final_speed']:.1f} / "
+        f"{100 * g['median_mpm_final_speed']:.1f} |")
   lines += [
       "", "## Test error by checkpoint (Fig. 5)", "",
       f"Over the first {summary['checkpoint_trajectories']} test "

@@ -213,6 +213,8 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
       "gns_deposit_error_m": row["deposit_error"],
       "gns_max_inside_solids": row["max_inside_solids"],
       "gns_max_outside_domain": row["max_outside_domain"],
+      "gns_final_speed_m_s": row["final_speed"],
+      "mpm_final_speed_m_s": row["mpm_final_speed"],
       "mpm_max_inside_solids": row["mpm_max_inside_solids"],
       "gns_mean_pushed_fraction": row["mean_pushed_fraction"],
   }

@@ -15,6 +15,8 @@ Shapes: T steps, N sand particles. Positions in metres.
 - ``mass_past``: the fraction of the sand past fixed lines across the ramp
   per step, comparable between simulations of different particle counts.
 - ``constant_velocity``: the baseline every learned model must beat.
+- ``final_speed``: the sand's mean speed over the last steps (m/s): a
+  deposit that should rest but jitters in place shows here, not in the MSE.
 """
 
 import jax
@@ -128,6 +130,18 @@ def constant_velocity(positions: np.ndarray, frames: np.ndarray,
   v = (positions[last] - positions[last - k]) / k
   steps = (np.asarray(frames) - last)[:, None, None]
   return positions[last][None] + v[None] * steps
+
+
+def final_speed(positions: np.ndarray, times: np.ndarray,
+                last: int = 5) -> float:
+  """Mean particle speed (m/s) over the last ``last`` steps of [T, N, 2]
+  positions at ``times`` [T] (s)."""
+  if len(times) != len(positions) or len(times) < 2:
+    raise ValueError(f"final_speed: {len(positions)} steps and "
+                     f"{len(times)} times; need as many, at least 2")
+  x, t = positions[-(last + 1):], np.asarray(times, float)[-(last + 1):]
+  step = np.linalg.norm(np.diff(x, axis=0), axis=-1)
+  return float(np.mean(step / np.diff(t)[:, None]))
 
 
 def front_error_relative(pred: np.ndarray, true: np.ndarray,

@@ -100,6 +100,18 @@ class MetricsTest(absltest.TestCase):
         places=9)
     self.assertEqual(metrics.front_error_relative(true, true, start), 0.0)
 
+  def test_final_speed_by_hand(self):
+    # Particle 0 moves at (3, 4) cm per 7.5 ms step (6.67 m/s), particle 1
+    # rests; steps before the last five do not count.
+    times = 0.0075 * np.arange(8)
+    x = np.zeros((8, 2, 2))
+    x[:, 0] = np.arange(8)[:, None] * [0.03, 0.04]
+    x[:2, 1] = [[1.0, 1.0], [2.0, 0.0]]
+    self.assertAlmostEqual(metrics.final_speed(x, times), 0.05 / 0.0075 / 2)
+    self.assertEqual(metrics.final_speed(x[:, 1:], times), 0.0)
+    with self.assertRaisesRegex(ValueError, "need as many"):
+      metrics.final_speed(x, times[:-1])
+
   def test_constant_velocity_by_hand(self):
     # x = t^2 at frame t: the velocity changes, the baseline does not.
     t = np.arange(12.0)
