@@ -6,6 +6,7 @@ directly.
 """
 
 import dataclasses
+import hashlib
 import os
 from typing import Sequence
 
@@ -141,15 +142,48 @@ def demo_config(num_train: int, num_test: int, steps: int,
   return config
 
 
-def _ship_checkpoint(source: str, workdir: str) -> int:
-  """Copies a shipped checkpoint into ``workdir``; returns its step."""
+# In a demo's work directory: which shipped checkpoint it was started from.
+SHIPPED_RECORD = "shipped_from.json"
+
+
+def ship_checkpoint(source: str, workdir: str) -> int:
+  """Copies a shipped checkpoint into ``workdir``; returns its step.
+
+  A work directory started from another shipped checkpoint (an older model,
+  before an update) would resume its own run and silently show the old
+  model, so it is refused.
+
+  Raises:
+    mpm.InputError: when ``workdir`` holds checkpoints not started from this
+      one (it names what to delete).
+  """
   import shutil  # pylint: disable=g-import-not-at-top
   steps = sorted(int(d) for d in os.listdir(os.path.join(source, "checkpoints"))
                  if d.isdigit())
-  target = os.path.join(workdir, "checkpoints", str(steps[-1]))
+  with open(os.path.join(source, "provenance.json"), "rb") as f:
+    shipped = {"step": steps[-1],
+               "provenance_sha256": hashlib.sha256(f.read()).hexdigest()}
+  record = os.path.join(workdir, SHIPPED_RECORD)
+  held = os.path.join(workdir, "checkpoints")
+  if os.path.isdir(held) and os.listdir(held):
+    previous = mpm_io.read_json(record) if os.path.exists(record) else None
+    if previous != shipped:
+      raise mpm.InputError(
+          f"{workdir} holds a run started from another shipped model (or "
+          f"from none); delete {workdir} (or choose another --out) to start "
+          "from the current one")
+  # The record first: a kill between the two leaves a record and no
+  # checkpoint, which the next run accepts.
+  os.makedirs(workdir, exist_ok=True)
+  mpm_io.write_json(record, shipped)
+  target = os.path.join(held, str(steps[-1]))
   if not os.path.exists(target):
+    # Copied whole or not at all: a half copy would pass for a checkpoint.
+    partial = target + ".partial"
+    shutil.rmtree(partial, ignore_errors=True)
     shutil.copytree(os.path.join(source, "checkpoints", str(steps[-1])),
-                    target)
+                    partial)
+    os.replace(partial, target)
   return steps[-1]
 
 
@@ -178,7 +212,7 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
   os.makedirs(workdir, exist_ok=True)
   start = 0
   if pretrained and os.path.isdir(os.path.join(pretrained, "checkpoints")):
-    start = _ship_checkpoint(pretrained, workdir)
+    start = ship_checkpoint(pretrained, workdir)
   config = demo_config(num_train, num_test, start + finetune_steps,
                        num_frames)
   spec = dataset.DatasetSpec(**config.dataset.to_dict())

@@ -3,10 +3,14 @@ provenance says it is."""
 
 import json
 import os
+import shutil
+import tempfile
 
 from absl.testing import absltest
 import jax
 import numpy as np
+
+import mpm
 
 from experiments import tasks
 from gnsjax import train
@@ -28,6 +32,25 @@ class PretrainedTest(absltest.TestCase):
     self.assertTrue(all(np.all(np.isfinite(x)) for x in leaves))
     self.assertEqual(run.problem.frame_stride,
                      provenance["config"]["train"]["frame_stride"])
+
+  def test_demo_refuses_a_run_of_another_shipped_model(self):
+    # After the shipped model changes, a demo's old work directory would
+    # resume its own run and show the old model: refused, naming it.
+    tmp_dir = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp_dir.cleanup)
+    tmp = tmp_dir.name
+    source = os.path.join(tmp, "shipped")
+    shutil.copytree(tasks.PRETRAINED, source)
+    workdir = os.path.join(tmp, "run")
+    step = tasks.ship_checkpoint(source, workdir)
+    self.assertEqual(tasks.ship_checkpoint(source, workdir), step)  # resumes
+    self.assertEqual(train.load_run(workdir).step, step)
+    with open(os.path.join(source, "provenance.json"), "a") as f:
+      f.write("\n")  # another shipped model
+    with self.assertRaisesRegex(mpm.InputError, "another shipped model"):
+      tasks.ship_checkpoint(source, workdir)
+    fresh = os.path.join(tmp, "fresh")
+    self.assertEqual(tasks.ship_checkpoint(source, fresh), step)
 
 
 if __name__ == "__main__":
