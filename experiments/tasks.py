@@ -447,6 +447,7 @@ def ablation(data_dir: str, out_dir: str, *, minutes: float = 8.0,
   from experiments import evaluation  # pylint: disable=g-import-not-at-top
   from experiments.configs import small  # pylint: disable=g-import-not-at-top
   from gnsjax import train  # pylint: disable=g-import-not-at-top
+  import jax  # pylint: disable=g-import-not-at-top
   known = [name for name, _ in ABLATION]
   unknown = set(variants or ()) - set(known)
   if unknown:
@@ -466,6 +467,10 @@ def ablation(data_dir: str, out_dir: str, *, minutes: float = 8.0,
     if variants and name not in variants:
       continue
     workdir = os.path.join(out_dir, name)
+    # No program of one variant serves the next, and XLA:CPU keeps every
+    # compiled program mapped until it is freed: six trainings in one
+    # process ran out of memory maps and crashed.
+    jax.clear_caches()
     train.train_and_evaluate(config, data_dir, workdir)
     run = train.load_run(workdir)
     results = evaluation.rollout_split(run, test_path, max_trajectories,
