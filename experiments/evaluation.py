@@ -72,6 +72,7 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
   """
   pred, truth = out.positions, t.positions[frames]
   scene = t.scene
+  times = frames * scene.frame_dt
   n = pred.shape[1]
   constant = metrics.constant_velocity(t.positions, frames,
                                        problem.input_frames,
@@ -88,8 +89,8 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
       "inside_solids": metrics.inside_solids(pred, scene),
       "outside_domain": metrics.outside_domain(pred, scene),
       "mpm_inside_solids": metrics.inside_solids(truth, scene),
-      "final_speed": metrics.final_speed(pred, frames * scene.frame_dt),
-      "mpm_final_speed": metrics.final_speed(truth, frames * scene.frame_dt),
+      "final_speed": metrics.final_speed(pred, times),
+      "mpm_final_speed": metrics.final_speed(truth, times),
       "pushed_fraction": out.pushed / n,
       "pushed_depth": out.depth,
   }

@@ -31,9 +31,6 @@ InputError = mpm_scene.InputError
 
 # The record of what an averaged run was made from, in its work directory.
 RECORD = "averaged.json"
-# Settings besides the model's that give parameters their meaning.
-_PROBLEM_KEYS = (("train", "input_frames"), ("train", "frame_stride"),
-                 ("dataset", "spacing"), ("dataset", "connectivity_radius"))
 
 
 def check_weights(weights: Sequence[float], count: int) -> list[float]:
@@ -65,13 +62,10 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
         raise InputError(f"{name}: model.{key} is {other.get(key)!r}, "
                          f"{names[0]} has {model.get(key)!r}; only runs of "
                          "one architecture can be averaged")
-    for section, key in _PROBLEM_KEYS:
-      a = first.config.to_dict().get(section, {}).get(key)
-      b = run.config.to_dict().get(section, {}).get(key)
-      if a != b:
-        raise InputError(f"{name}: {section}.{key} is {b!r}, {names[0]} "
-                         f"has {a!r}; only runs of one problem can be "
-                         "averaged")
+    for where, a, b in run_lib.physics_differences(first.config.to_dict(),
+                                                   run.config.to_dict()):
+      raise InputError(f"{name}: {where} is {b!r}, {names[0]} has {a!r}; "
+                       "only runs of one problem can be averaged")
     if run.problem.to_dict() != first.problem.to_dict():
       raise InputError(f"{name}: its normalisation statistics differ from "
                        f"{names[0]}'s (trained on other data?); only runs "

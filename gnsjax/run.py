@@ -34,6 +34,22 @@ def model_config_dict(model_config) -> dict:
   return {**MODEL_DEFAULTS, **dict(model_config)}
 
 
+# Settings besides the model's own that give its parameters their meaning:
+# the data's (others, like trajectory counts, may change between a run and
+# its fine-tuning) and the inputs'.
+_PHYSICS = (("train", "input_frames"), ("train", "frame_stride"),
+            ("dataset", "spacing"), ("dataset", "connectivity_radius"))
+
+
+def physics_differences(stored: dict, current: dict
+                        ) -> list[tuple[str, Any, Any]]:
+  """("section.key", stored value, current value) for each of those
+  settings that differs between two config dicts."""
+  pairs = [(f"{section}.{key}", stored.get(section, {}).get(key),
+            current.get(section, {}).get(key)) for section, key in _PHYSICS]
+  return [(where, a, b) for where, a, b in pairs if a != b]
+
+
 def create_model(model_config: ml_collections.ConfigDict
                  ) -> models.EncodeProcessDecode:
   model_config = model_config_dict(model_config)

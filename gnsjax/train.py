@@ -154,22 +154,12 @@ def _config_dict(config) -> dict:
   return json.loads(config.to_json_best_effort())
 
 
-# Dataset settings a model depends on (others, like trajectory counts, may
-# change between a run and its fine-tuning).
-_DATA_PHYSICS = ("spacing", "connectivity_radius")
-# Training settings the model's inputs depend on.
-_TRAIN_PHYSICS = ("input_frames", "frame_stride")
-
-
 def check_compatible(stored: dict, config) -> None:
   """Refuses to resume a run whose model or data physics differ."""
   current = _config_dict(config)
   pairs = [("model", run_lib.model_config_dict(stored.get("model", {})),
-            run_lib.model_config_dict(current.get("model", {})))] + [
-      (f"train.{k}", stored.get("train", {}).get(k),
-       current.get("train", {}).get(k)) for k in _TRAIN_PHYSICS] + [
-      (f"dataset.{k}", stored.get("dataset", {}).get(k),
-       current.get("dataset", {}).get(k)) for k in _DATA_PHYSICS]
+            run_lib.model_config_dict(current.get("model", {})))]
+  pairs += run_lib.physics_differences(stored, current)
   for where, old, new in pairs:
     if old != new:
       raise InputError(
