@@ -1,11 +1,13 @@
 """Granular column collapse, the MPM's convergence benchmark: the scene, the
-runout and Richardson extrapolation (``python -m experiments.convergence``).
+runouts, the paper scenes' measures and Richardson extrapolation
+(``python -m experiments.convergence``).
 
 A column of sand (height h0, width h0 / a for aspect ratio a) against a
 frictionless wall collapses on a flat floor (friction 0.7, friction angle 45
 deg). The normalised runout (L - L0) / L0 is measured from the furthest
-particle and from the 99.5% quantile of x (less sensitive to single
-particles).
+particle (the front), from the 99.5% and 90% quantiles of x (L behind which
+that fraction of the sand lies) and from the centre of mass: the front
+measures the deposit's thinnest toe, the centre its bulk.
 """
 
 import math
@@ -38,11 +40,27 @@ def column_scene(aspect: float, spacing: float, height: float = 0.1,
       "num_frames": int(round(duration / 0.0025))})
 
 
-def runouts(final_x: np.ndarray, width0: float) -> tuple[float, float]:
-  """Normalised runouts (L - L0) / L0 of the furthest particle and of the
-  99.5% quantile of the final x [N] (m)."""
-  return ((float(np.max(final_x)) - width0) / width0,
-          (float(np.quantile(final_x, 0.995)) - width0) / width0)
+# Deposit measures, from the toe to the bulk: (name, quantile of the final
+# x; None for the centre of mass).
+MEASURES = (("runout_front", 1.0), ("runout_q995", 0.995),
+            ("runout_q90", 0.9), ("centre", None))
+
+
+def runouts(final_x: np.ndarray, width0: float) -> dict[str, float]:
+  """Normalised runouts of the final x [N] (m) of a column of width
+  ``width0`` (m), keyed as ``MEASURES``.
+
+  A quantile q gives (L_q - L0) / L0, L_q the x behind which a fraction q of
+  the sand lies (1: the furthest particle, the front); the centre gives
+  (X - L0 / 2) / L0, X the mean x, L0 / 2 the column's own.
+  """
+  out = {}
+  for name, q in MEASURES:
+    if q is None:
+      out[name] = (float(np.mean(final_x)) - width0 / 2) / width0
+    else:
+      out[name] = (float(np.quantile(final_x, q)) - width0) / width0
+  return out
 
 
 def richardson(values: Sequence[float]) -> tuple[float, float]:
@@ -55,3 +73,78 @@ def richardson(values: Sequence[float]) -> tuple[float, float]:
   ratio = d1 / d2
   order = math.log2(ratio)
   return c + d2 / (ratio - 1), order
+
+
+# Paper scenes: (name, quantile of x; None for the mean). The sand runs
+# towards x = 0, so its front is a low quantile.
+PAPER_MEASURES = (("front_travel_m", 0.0), ("front_q01_travel_m", 0.01),
+                  ("front_q10_travel_m", 0.1), ("mean_travel_m", None))
+
+
+def paper_measures(initial_x: np.ndarray,
+                   final_x: np.ndarray) -> dict[str, float]:
+  """How far (m) each of ``PAPER_MEASURES`` moved downhill between the first
+  and the last frame's x [N] (m): distances travelled, so that relative
+  errors do not depend on where the domain's origin lies."""
+  def at(x, q):
+    return float(np.mean(x) if q is None else np.quantile(x, q))
+  return {name: at(initial_x, q) - at(final_x, q)
+          for name, q in PAPER_MEASURES}
+
+
+# Below this observed order an extrapolation is dominated by its last change
+# (at order 0.1 the limit lies 13 changes away) and is not reported.
+MIN_ORDER = 0.5
+
+
+def extrapolations(rows: Sequence[dict], group: str, keys: Sequence[str],
+                   default_spacing: float = 0.005) -> list[str]:
+  """A line per value of ``rows``' column ``group`` and per ``key``: the
+  changes between successive rows (coarse to fine, column ``spacing_m``),
+  Richardson extrapolation over the last three, and how far the row at
+  ``default_spacing`` (m) and the finest row lie from it (relative)."""
+  lines = []
+  for value in dict.fromkeys(r[group] for r in rows):
+    mine = [r for r in rows if r[group] == value]
+    if len(mine) < 3:
+      continue
+    for key in keys:
+      limit, order = richardson([r[key] for r in mine])
+      finest = mine[-1][key]
+      label = f"{value:g}" if isinstance(value, float) else value
+      if not math.isfinite(limit):
+        verdict = "Richardson undefined: the changes do not shrink"
+      elif order < MIN_ORDER:
+        verdict = (f"the changes shrink too slowly (order {order:.2f}) for "
+                   "an extrapolation to mean anything")
+      else:
+        verdict = (f"Richardson {limit:.4g} (order {order:.2f}); the "
+                   "default spacing's value is "
+                   f"{_off(mine, key, limit, default_spacing)} from it, the "
+                   f"finest's {_relative(finest, limit):.1%}")
+      values = [r[key] for r in mine]
+      changes = ", ".join(f"{b - a:+.3g}" for a, b in zip(values, values[1:]))
+      lines.append(f"- {group} {label}, {key} (changes {changes}): {verdict}")
+  return lines
+
+
+def _relative(value, limit):
+  return abs(value - limit) / max(abs(limit), 1e-12)
+
+
+def _off(rows, key, limit, default_spacing):
+  default = [r for r in rows if r["spacing_m"] == default_spacing]
+  if not default:
+    return "(not run)"
+  return f"{_relative(default[0][key], limit):.1%}"
+
+
+def markdown_table(rows: Sequence[dict]) -> list[str]:
+  """Lines of a markdown table of ``rows`` (dicts with the same keys)."""
+  cols = list(rows[0])
+  lines = ["| " + " | ".join(cols) + " |", "|---" * len(cols) + "|"]
+  for r in rows:
+    lines.append("| " + " | ".join(
+        f"{r[c]:.4g}" if isinstance(r[c], float) else str(r[c])
+        for c in cols) + " |")
+  return lines

@@ -181,6 +181,13 @@ ROWS = (
     ("tradeoff_gns_spacing", "experiments.tradeoff",
      ["--out={d}/out", "--spacings=0.02"],
      "--gns small: trained at spacing 0.01 m, which is not in --spacings"),
+    ("convergence_spacings", "experiments.convergence",
+     ["--out={d}/out", "--spacings=0.01,0"],
+     "--spacings=0.01,0; allowed: comma-separated numbers > 0"),
+    ("convergence_paper_scenes", "experiments.convergence",
+     ["--out={d}/out", "--paper_scenes=0,x"],
+     "--paper_scenes=0,x; allowed: comma-separated indices >= 0 into the "
+     "paper's test plan"),
     ("inverse_design_x0_high", "experiments.inverse_design",
      ["--out={d}/out", "--x0=1.6"], "--x0=1.6; allowed: [0.5, 1.3] m"),
     # Issue 14: bad problems and designs, a missing budget.
