@@ -4,8 +4,9 @@ A window's nodes are its moving particles, then (if boundary particles are
 modelled) the boundary particles that are within the connectivity radius of
 a moving particle in the last input frame (the only boundary particles that
 get an edge: a scene pays only for what it contains), then padding. Each
-window carries its scene's SDF grid, from which the model sees the solids. Each batch is padded to a multiple of
-``node_bucket`` nodes so that training compiles a handful of times.
+window carries its scene's SDF grid, from which the model sees the solids.
+Each batch is padded to a multiple of ``node_bucket`` nodes so that training
+compiles a handful of times.
 
 Shapes: B windows, C + 1 frames (C inputs and the target), N padded nodes.
 """

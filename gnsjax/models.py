@@ -85,7 +85,8 @@ class InteractionBlock(nn.Module):
       # The first edge layer, split: node terms once per node.
       nodes = {
           "h": h,
-          "s": nn.Dense(self.latent_size, use_bias=False, name="edge_sender")(h),
+          "s": nn.Dense(self.latent_size, use_bias=False,
+                        name="edge_sender")(h),
           "r": nn.Dense(self.latent_size, use_bias=False,
                         name="edge_receiver")(h),
       }

@@ -11,8 +11,8 @@ fixed number of steps, so one compiled program serves any length. If the
 neighbour list overflows at step k, steps k and later of that chunk are
 discarded; the host reallocates a larger list from the last good positions
 and resumes from step k. Capacities are rounded up to a ladder of sizes
-(``graph.rounded_up``), so the compiled programs are few. The result therefore equals a rollout that had
-enough capacity from the start (tested).
+(``graph.rounded_up``), so the compiled programs are few. The result therefore
+equals a rollout that had enough capacity from the start (tested).
 
 ``rollout_batch`` runs B scenes at once: each is padded to the largest node
 count with padding nodes parked on ``graph.parking_positions`` (not moving,

@@ -1,4 +1,5 @@
-"""Training the learned simulator: ``train_and_evaluate(config, data, workdir)``.
+"""Training the learned simulator:
+``train_and_evaluate(config, data, workdir)``.
 
 The only module that reads a config. Each step: B windows (a pure function of
 the step, see ``gnsjax.data.WindowDataset``), padded to a node bucket; random-

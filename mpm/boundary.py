@@ -106,7 +106,8 @@ def make_field(spec: transfer.GridSpec, index: jax.Array, width: float,
       [index // spec.shape[1], index % spec.shape[1]], -1).astype(jnp.float32))
   sdf = lambda q: geometry.solid_sdf(ramp, obstacles, q)
   phi, grad = jax.vmap(jax.value_and_grad(sdf))(p)
-  normal = grad * jax.lax.rsqrt(jnp.maximum(jnp.sum(grad**2, -1), 1e-12))[:, None]
+  normal = grad * jax.lax.rsqrt(
+      jnp.maximum(jnp.sum(grad**2, -1), 1e-12))[:, None]
   dist_x, dist_y, sign_x, sign_y = _wall_distances(p, width, height)
   real = (index > 0).astype(phi.dtype)
   nodes = jnp.asarray(spec.node_positions(), jnp.float32)

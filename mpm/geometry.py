@@ -481,8 +481,8 @@ def granular_particles(scene: scene_lib.Scene) -> np.ndarray:
   if len(free) < wanted:
     raise scene_lib.InputError(
         f"granular.box = {list(g.box)}: only {len(free)} lattice points at "
-        f"spacing {g.spacing:g} m lie above the ramp and outside obstacles, but "
-        f"{wanted} particles are needed; allowed: a box with free space for "
+        f"spacing {g.spacing:g} m lie above the ramp and outside obstacles, "
+        f"but {wanted} particles are needed; allowed: a box with free space for "
         "num_particles (move it above the ramp or enlarge it)")
   order = np.lexsort((-free[:, 0], free[:, 1]))  # by row, then uphill first
   return free[order[:wanted]].astype(np.float32)

@@ -159,7 +159,8 @@ class Scene:
   def to_dict(self) -> dict[str, Any]:
     ramp = ({"kind": "polyline", "points": [list(p) for p in self.ramp.points]}
             if self.ramp.kind == "polyline" else
-            {"kind": "polynomial", "coefficients": list(self.ramp.coefficients)})
+            {"kind": "polynomial",
+             "coefficients": list(self.ramp.coefficients)})
     granular = {"box": list(self.granular.box),
                 "spacing": self.granular.spacing}
     if self.granular.num_particles is not None:
@@ -250,8 +251,9 @@ def _parse_ramp(d: Mapping[str, Any], domain: Domain) -> Ramp:
     if (not isinstance(coefficients, (list, tuple)) or not coefficients or
         not all(isinstance(c, (int, float)) and math.isfinite(c)
                 for c in coefficients)):
-      raise InputError("ramp.coefficients: expected a non-empty list of finite "
-                       f"numbers c_k with y(x) = sum c_k x^k, got {coefficients!r}")
+      raise InputError("ramp.coefficients: expected a non-empty list of "
+                       "finite numbers c_k with y(x) = sum c_k x^k, got "
+                       f"{coefficients!r}")
     return Ramp("polynomial", tuple(float(c) for c in coefficients))
   if kind == "polyline":
     _check_keys(d, ("kind", "points"), "ramp")

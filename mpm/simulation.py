@@ -27,7 +27,8 @@ GRAVITY = 9.81  # m/s^2
 
 
 class SimulationError(RuntimeError):
-  """A rollout went non-finite or broke its CFL bound (scene and frame named)."""
+  """A rollout went non-finite or broke its CFL bound (scene and frame
+  named)."""
 
   def __init__(self, scene_name: str, frame: int, reason: str):
     super().__init__(f"scene {scene_name!r}, frame {frame}: {reason}")

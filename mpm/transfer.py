@@ -105,11 +105,11 @@ def p2g(st: Stencil, mass: jax.Array, momentum: jax.Array, affine: jax.Array,
   Returns:
     [G, 3] node momentum (x, y) and mass.
   """
-  dpos = st.offset
+  ox, oy = st.offset[..., 0], st.offset[..., 1]    # [N, S] node - particle
+  a = affine[:, None]
   mv = momentum[:, None, :] + jnp.stack(
-      [affine[:, None, 0, 0] * dpos[..., 0] + affine[:, None, 0, 1] * dpos[..., 1],
-       affine[:, None, 1, 0] * dpos[..., 0] + affine[:, None, 1, 1] * dpos[..., 1]],
-      -1)
+      [a[..., 0, 0] * ox + a[..., 0, 1] * oy,
+       a[..., 1, 0] * ox + a[..., 1, 1] * oy], -1)
   values = jnp.concatenate([st.weight[..., None] * mv,
                             (st.weight * mass[:, None])[..., None]], -1)
   # Materialise the values: fused into the scatter they are recomputed per
