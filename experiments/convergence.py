@@ -13,7 +13,8 @@ avalanche's front (the smallest x: the sand runs towards x = 0), its 1% and
 10% quantiles and its mean x travelled. Richardson extrapolation over the
 three finest spacings estimates the converged value where the changes
 shrink. Writes
-``convergence.csv``, ``convergence_paper.csv``, ``convergence.md`` and
+``convergence.csv``, ``convergence_paper.csv``, ``convergence.md``,
+``deposits.png`` (the final deposits at every spacing, overlaid) and
 ``environment.json`` (machine, load, command).
 """
 
@@ -29,6 +30,7 @@ import tqdm
 import mpm
 from experiments import column_collapse
 from experiments import evaluation
+from experiments import figures
 from experiments import pareto
 from experiments import runtime
 from experiments.benchmarks import timing
@@ -76,6 +78,8 @@ def main(argv):
   env = timing.environment(quick=False, command=" ".join(
       ["python -m experiments.convergence"] + sys.argv[1:]))
   column_rows, paper_rows = [], []
+  # Panel title -> (scene, [(spacing, final positions [N, 2])]).
+  deposits = {}
 
   def save():
     evaluation.write_csv(os.path.join(_OUT.value, "convergence.csv"),
@@ -97,6 +101,8 @@ def main(argv):
           **column_collapse.runouts(x[-1, :, 0], _HEIGHT.value / aspect),
           "still_moving_m": float(np.abs(x[-1] - x[-11]).max()),
           "wall_time_s": round(wall, 1)})
+      deposits.setdefault(f"column, a = {aspect:g}", (scene, []))[1].append(
+          (spacing, x[-1]))
       save()
   for index in paper:
     for spacing in tqdm.tqdm(paper_spacings, desc=plan[index].name,
@@ -110,8 +116,14 @@ def main(argv):
                          **column_collapse.paper_measures(x[0, :, 0],
                                                          x[-1, :, 0]),
                          "wall_time_s": round(wall, 1)})
+      deposits.setdefault(plan[index].name, (scene, []))[1].append(
+          (spacing, x[-1]))
       save()
 
+  if deposits:
+    figures.resolution_deposits(
+        [(title, scene, runs) for title, (scene, runs) in deposits.items()],
+        os.path.join(_OUT.value, "deposits.png"))
   timing.end_environment(env)
   keys = [name for name, _ in column_collapse.MEASURES]
   lines = [f"`{env['command']}`", "",

@@ -263,6 +263,45 @@ def flow_checks(results: Sequence[dict], frame_dt: float, path: str):
   _save(fig, path)
 
 
+def resolution_deposits(
+    cases: Sequence[tuple[str, mpm.Scene, Sequence[tuple[float, np.ndarray]]]],
+    path: str, columns: int = 4) -> str:
+  """Final deposits of one scene at several particle spacings, overlaid.
+
+  Args:
+    cases: (title, scene, [(spacing (m), final positions [N, 2] (m)), ...]),
+      one panel each, zoomed to the sand; coarse to fine.
+    path: the PNG to write.
+
+  Returns:
+    ``path``.
+  """
+  columns = min(columns, len(cases))
+  rows = -(-len(cases) // columns)
+  fig, axes = plt.subplots(rows, columns, figsize=(4.5 * columns, 3.2 * rows),
+                           squeeze=False)
+  colours = plt.get_cmap("viridis")
+  empty = (np.zeros((0, 2)), np.zeros((0,), np.int32))
+  for ax, (title, scene, runs) in zip(axes.ravel(), cases):
+    _draw_scene(ax, scene, *empty)
+    everything = np.concatenate([x for _, x in runs])
+    finest = min(spacing for spacing, _ in runs)
+    for k, (spacing, x) in enumerate(runs):
+      ax.scatter(x[:, 0], x[:, 1], s=min(30.0, 2.0 * (spacing / finest)**2),
+                 color=colours(k / max(len(runs) - 1, 1)), alpha=0.6,
+                 linewidths=0, label=f"{spacing * 1000:g} mm", zorder=3)
+    low, high = everything.min(0), everything.max(0)
+    pad = 0.08 * max(high[0] - low[0], high[1] - low[1], 0.05)
+    ax.set_xlim(low[0] - pad, high[0] + pad)
+    ax.set_ylim(max(0.0, low[1] - pad), high[1] + pad)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+  for ax in axes.ravel()[len(cases):]:
+    ax.axis("off")
+  _save(fig, path)
+  return path
+
+
 def pareto(summary: Sequence[dict], path: str, batched: bool = False):
   """Error against cost (log-log): each configuration's worst front error
   over the study's scenes (filled) and median (hollow) against its seconds

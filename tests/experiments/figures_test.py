@@ -67,6 +67,14 @@ class FiguresTest(absltest.TestCase):
                                   os.path.join(self.dir, "o.png"))
     self.assertGreater(os.path.getsize(path), 0)
 
+  def test_resolution_deposits_overlay_every_spacing_in_its_panel(self):
+    runs = [(0.01, self.x[-1]), (0.005, self.x[-1] + 0.01)]
+    path = figures.resolution_deposits(
+        [("one", SCENE, runs), ("two", SCENE, runs[:1])],
+        os.path.join(self.dir, "d.png"))
+    self.assertGreater(os.path.getsize(path), 0)
+    self.assertEqual(os.listdir(self.dir), ["d.png"])   # no temporary left
+
 
 if __name__ == "__main__":
   absltest.main()
