@@ -16,6 +16,7 @@ from typing import Sequence
 import numpy as np
 
 import mpm
+from mpm import dataset
 
 FLOOR = 0.02            # m, the floor's height in the domain
 FLOOR_FRICTION = 0.7
@@ -98,7 +99,8 @@ MIN_ORDER = 0.5
 
 
 def extrapolations(rows: Sequence[dict], group: str, keys: Sequence[str],
-                   default_spacing: float = 0.005) -> list[str]:
+                   default_spacing: float = dataset.PAPER_SPACING
+                   ) -> list[str]:
   """A line per value of ``rows``' column ``group`` and per ``key``: the
   changes between successive rows (coarse to fine, column ``spacing_m``),
   Richardson extrapolation over the last three, and how far the row at
@@ -109,8 +111,8 @@ def extrapolations(rows: Sequence[dict], group: str, keys: Sequence[str],
     if len(mine) < 3:
       continue
     for key in keys:
-      limit, order = richardson([r[key] for r in mine])
-      finest = mine[-1][key]
+      values = [r[key] for r in mine]
+      limit, order = richardson(values)
       label = f"{value:g}" if isinstance(value, float) else value
       if not math.isfinite(limit):
         verdict = "Richardson undefined: the changes do not shrink"
@@ -121,8 +123,7 @@ def extrapolations(rows: Sequence[dict], group: str, keys: Sequence[str],
         verdict = (f"Richardson {limit:.4g} (order {order:.2f}); the "
                    "default spacing's value is "
                    f"{_off(mine, key, limit, default_spacing)} from it, the "
-                   f"finest's {_relative(finest, limit):.1%}")
-      values = [r[key] for r in mine]
+                   f"finest's {_relative(values[-1], limit):.1%}")
       changes = ", ".join(f"{b - a:+.3g}" for a, b in zip(values, values[1:]))
       lines.append(f"- {group} {label}, {key} (changes {changes}): {verdict}")
   return lines

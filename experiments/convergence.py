@@ -18,7 +18,6 @@ shrink. Writes
 ``environment.json`` (machine, load, command).
 """
 
-import json
 import os
 import sys
 import time
@@ -65,6 +64,13 @@ def _numbers(name: str, values: list[str], kind: type) -> list:
   return out
 
 
+def _simulate(scene: mpm.Scene) -> tuple[np.ndarray, float]:
+  """Positions [T, N, 2] of ``scene`` and the seconds the call took."""
+  start = time.perf_counter()
+  x = np.asarray(mpm.simulate(scene).positions)
+  return x, time.perf_counter() - start
+
+
 def main(argv):
   del argv
   runtime.writable("out", _OUT.value)
@@ -92,9 +98,7 @@ def main(argv):
     for spacing in tqdm.tqdm(spacings, desc=f"a = {aspect:g}", unit="run"):
       scene = column_collapse.column_scene(aspect, spacing, _HEIGHT.value,
                                            _CFL.value, _TIME.value)
-      start = time.perf_counter()
-      x = np.asarray(mpm.simulate(scene).positions)
-      wall = time.perf_counter() - start
+      x, wall = _simulate(scene)
       column_rows.append({
           "aspect_ratio": aspect, "spacing_m": spacing, "dx_m": scene.dx,
           "particles": x.shape[1],
@@ -108,9 +112,7 @@ def main(argv):
     for spacing in tqdm.tqdm(paper_spacings, desc=plan[index].name,
                              unit="run"):
       scene = pareto.at_spacing(plan[index], spacing)
-      start = time.perf_counter()
-      x = np.asarray(mpm.simulate(scene).positions)
-      wall = time.perf_counter() - start
+      x, wall = _simulate(scene)
       paper_rows.append({"scene": plan[index].name, "spacing_m": spacing,
                          "dx_m": scene.dx, "particles": x.shape[1],
                          **column_collapse.paper_measures(x[0, :, 0],
@@ -142,8 +144,7 @@ def main(argv):
         paper_rows, "scene", [n for n, _ in column_collapse.PAPER_MEASURES])
   mpm_io.write_text(os.path.join(_OUT.value, "convergence.md"),
                     "\n".join(lines) + "\n")
-  mpm_io.write_text(os.path.join(_OUT.value, "environment.json"),
-                    json.dumps(env, indent=1) + "\n")
+  mpm_io.write_json(os.path.join(_OUT.value, "environment.json"), env)
   print("\n".join(lines))
 
 

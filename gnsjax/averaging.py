@@ -14,7 +14,6 @@ which continues the last run's optimiser). Its ``averaged.json`` names the
 sources and weights.
 """
 
-import json
 import math
 import os
 from typing import Any, Sequence
@@ -25,6 +24,7 @@ import orbax.checkpoint as ocp
 
 from gnsjax import checkpoint
 from gnsjax import run as run_lib
+from mpm import io as mpm_io
 from mpm import scene as mpm_scene
 
 InputError = mpm_scene.InputError
@@ -123,10 +123,7 @@ def write_average(workdirs: Sequence[str], weights: Sequence[float],
   record = {"sources": [{"workdir": os.path.normpath(w), "step": r.step}
                         for w, r in zip(workdirs, runs)],
             "weights": weights}
-  tmp = os.path.join(out, RECORD + ".tmp")
-  with open(tmp, "w") as f:
-    json.dump(record, f, indent=1)
-  os.replace(tmp, os.path.join(out, RECORD))
+  mpm_io.write_json(os.path.join(out, RECORD), record)
   mngr = checkpoint.manager(out, every_steps=1)
   checkpoint.save(mngr, step, state, stored["config"], stored["stats"],
                   capacities or None, force=True)

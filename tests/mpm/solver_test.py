@@ -21,6 +21,7 @@ G = 9.81
 FLOOR = 0.05  # height of the flat floor [m]
 
 _SOLID_SDF = jax.jit(geometry.solid_sdf)
+_ROLLOUT = jax.jit(solver.rollout, static_argnums=(3, 4, 5))
 _OBSTACLE_SDF = jax.jit(geometry.obstacle_sdf)
 
 
@@ -112,9 +113,8 @@ class MassTest(absltest.TestCase):
                                     "radius": 0.04}],
                         num_frames=11, frame_dt=0.01)
     s = mpm.setup(scene)
-    final, positions, _, finite = jax.jit(
-        solver.rollout, static_argnums=(3, 4, 5))(
-            s.state, s.params, s.field, s.spec, 10, s.n_substeps)
+    final, positions, _, finite = _ROLLOUT(
+        s.state, s.params, s.field, s.spec, 10, s.n_substeps)
     self.assertTrue(np.all(finite))
     self.assertEqual(positions.shape, (10,) + s.state.x.shape)
     # Particle volumes (and so masses) never change.
@@ -247,9 +247,6 @@ class SlidingLayerTest(parameterized.TestCase):
     coarse, fine = (self._travel(0.04, s)[-1] for s in (0.005, 0.0025))
     self.assertGreater(coarse, 0.99 * self.V0**2 / (2 * self.MU * G))
     np.testing.assert_allclose(fine, coarse, rtol=0.02)
-
-
-_ROLLOUT = jax.jit(solver.rollout, static_argnums=(3, 4, 5))
 
 
 class InclineTest(parameterized.TestCase):
