@@ -32,7 +32,7 @@ from experiments import evaluation
 from experiments import figures
 from experiments import pareto
 from experiments import runtime
-from experiments.benchmarks import timing
+from experiments import timing
 from mpm import io as mpm_io
 
 _OUT = flags.DEFINE_string("out", None, "Output directory.")

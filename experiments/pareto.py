@@ -26,7 +26,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 import mpm
-from experiments.benchmarks import timing
+from experiments import timing
 from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib

@@ -6,15 +6,18 @@ Every entry point ends in ``runtime.run(main)`` (instead of
 it refuses it raises as ``InputError`` (or ``app.UsageError``).
 """
 
+import dataclasses
 import os
 import sys
-from typing import Callable
+import typing
+from typing import Any, Callable
 
 from absl import app
 from absl import flags
 import jax
 
 import mpm
+from experiments.studies import settings as settings_lib
 from mpm import io as mpm_io
 
 # A value given by the user is malformed or out of range (a flag, a scene
@@ -106,3 +109,63 @@ def enable_compilation_cache(path: str | None = None) -> str:
   jax.config.update("jax_compilation_cache_dir", path)
   jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
   return path
+
+
+# ------------------------------------------------------------ settings ---
+
+_DEFINE = {bool: flags.DEFINE_bool, int: flags.DEFINE_integer,
+           float: flags.DEFINE_float, str: flags.DEFINE_string}
+
+
+def define_flags(settings_cls: type,
+                 flag_values: flags.FlagValues = flags.FLAGS,
+                 **defaults) -> dict[str, Any]:
+  """One flag per field of a study's ``Settings`` (``studies.settings``),
+  with the field's name, default and help; ``defaults`` replace a field's
+  default for this entry point only. Fields marked ``flag=False`` get none.
+
+  Returns:
+    field name -> its FlagHolder, for :func:`settings_from_flags`.
+  """
+  hints = typing.get_type_hints(settings_cls)
+  holders = {}
+  for f in dataclasses.fields(settings_cls):
+    if not f.metadata.get("flag", True):
+      continue
+    kind, sequence, _ = settings_lib.element_type(hints[f.name])
+    default = defaults.get(f.name, f.default)
+    help_text = f.metadata.get("help", "")
+    if f.metadata.get("choices"):
+      help_text += f" One of {', '.join(f.metadata['choices'])}."
+    if sequence:
+      holders[f.name] = flags.DEFINE_list(
+          f.name, None if default is None else [str(v) for v in default],
+          help_text, flag_values=flag_values)
+    else:
+      holders[f.name] = _DEFINE[kind](f.name, default, help_text,
+                                      flag_values=flag_values)
+  return holders
+
+
+def _parse(name: str, given: list[str], kind: type) -> tuple:
+  try:
+    return tuple(kind(v.strip()) for v in given
+                 if v.strip() or kind is not str)
+  except ValueError:
+    allowed = {int: "integers", float: "numbers"}.get(kind, "values")
+    raise InputError(f"--{name}={','.join(given)}; allowed: comma-separated "
+                     f"{allowed}") from None
+
+
+def settings_from_flags(settings_cls: type, holders: dict[str, Any],
+                        **values):
+  """The ``Settings`` the flags (and ``values``, for fields without a flag)
+  describe, checked; raises InputError naming the flag."""
+  hints = typing.get_type_hints(settings_cls)
+  for name, holder in holders.items():
+    kind, sequence, _ = settings_lib.element_type(hints[name])
+    value = holder.value
+    if sequence and value is not None:
+      value = _parse(name, value, kind)
+    values[name] = value
+  return settings_cls(**values)

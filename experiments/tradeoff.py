@@ -23,7 +23,7 @@ from experiments import evaluation
 from experiments import figures
 from experiments import pareto
 from experiments import runtime
-from experiments.benchmarks import timing
+from experiments import timing
 from gnsjax import run as run_lib
 
 _OUT = flags.DEFINE_string("out", None, "Output directory.")

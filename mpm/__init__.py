@@ -25,6 +25,7 @@ from mpm.geometry import scene_sdf_grid
 from mpm.sampler import sample_scene
 from mpm.scene import InputError
 from mpm.scene import Scene
+from mpm.simulation import GRAVITY
 from mpm.simulation import SimulationError
 from mpm.simulation import SimulationResult
 from mpm.simulation import Setup
@@ -38,7 +39,7 @@ from mpm.solver import SimParams
 from mpm.solver import rollout
 
 __all__ = [
-    "InputError", "KINEMATIC_TYPES", "OBSTACLE_TYPE", "RAMP_TYPE", "SAND_TYPE",
+    "GRAVITY", "InputError", "KINEMATIC_TYPES", "OBSTACLE_TYPE", "RAMP_TYPE", "SAND_TYPE",
     "MPMState", "SDFGrid", "Scene", "Setup", "SimParams", "SimulationError",
     "SimulationResult", "boundary_particles", "check_frames",
     "granular_particles", "push_out", "rollout", "sample_scene", "sample_sdf",

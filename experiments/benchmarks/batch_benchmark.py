@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import jax.numpy as jnp
 
-from experiments.benchmarks import timing
+from experiments import timing
 import mpm
 from mpm import simulation
 

@@ -20,7 +20,7 @@ Writes ``dataset_benchmark.json`` and ``.md`` to ``out_dir``.
 import os
 import tempfile
 
-from experiments.benchmarks import timing
+from experiments import timing
 from gnsjax import batching
 from gnsjax import data
 from gnsjax import graph

@@ -33,7 +33,7 @@ import resource
 import jax
 
 from experiments import tasks
-from experiments.benchmarks import timing
+from experiments import timing
 from experiments.configs import paper as paper_config
 from gnsjax import design
 from gnsjax import features

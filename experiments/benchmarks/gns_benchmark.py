@@ -76,7 +76,7 @@ from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import gns_programs
 from experiments.benchmarks import gns_report
 from experiments.benchmarks import op_profile
-from experiments.benchmarks import timing
+from experiments import timing
 
 
 @dataclasses.dataclass(frozen=True)

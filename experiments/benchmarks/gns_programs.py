@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import optax
 
 from experiments.benchmarks import gns_inputs
-from experiments.benchmarks import timing
+from experiments import timing
 from gnsjax import features
 from gnsjax import models
 from gnsjax import simulator

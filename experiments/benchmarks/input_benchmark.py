@@ -25,7 +25,7 @@ import time
 import jax
 import numpy as np
 
-from experiments.benchmarks import timing
+from experiments import timing
 from experiments.configs import small
 from gnsjax import batching
 from gnsjax import data

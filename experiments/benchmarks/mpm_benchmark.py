@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.benchmarks import scenes
-from experiments.benchmarks import timing
+from experiments import timing
 import mpm
 
 # A granular box large enough for 5000 particles at 0.005 m spacing (the

@@ -1,4 +1,5 @@
-"""How every benchmark times, what it records and how it writes its results.
+"""How every benchmark and study times, records its machine and writes
+its results.
 
 The rules (docs/performance.md) in one place:
 
@@ -23,12 +24,13 @@ import json
 import os
 import platform
 import statistics
-import tempfile
 import time
 from typing import Any, Callable, Mapping, Sequence
 
 import jax
 import numpy as np
+
+from mpm import io as mpm_io
 
 
 # ------------------------------------------------------------ timing ---
@@ -182,17 +184,6 @@ def _json_default(v):
   raise TypeError(f"not JSON serialisable: {type(v)}")
 
 
-def write_atomic(path: str, text: str) -> None:
-  """Writes ``text`` to ``path`` through a temporary file and a rename."""
-  directory = os.path.dirname(os.path.abspath(path))
-  with tempfile.NamedTemporaryFile("w", dir=directory, delete=False,
-                                   suffix=".tmp") as f:
-    f.write(text)
-    tmp = f.name
-  os.chmod(tmp, 0o644)
-  os.replace(tmp, path)
-
-
 def write_results(out_dir: str, name: str, quick: bool,
                   results: dict[str, Any], markdown: str) -> list[str]:
   """Writes ``<name>[_quick].json`` and ``.md`` to ``out_dir`` (created).
@@ -204,9 +195,9 @@ def write_results(out_dir: str, name: str, quick: bool,
   stem = os.path.join(out_dir, name + ("_quick" if quick else ""))
   content = {k: v for k, v in results.items()
              if k not in ("markdown", "files")}
-  write_atomic(stem + ".json",
+  mpm_io.write_text(stem + ".json",
                json.dumps(content, indent=1, default=_json_default) + "\n")
-  write_atomic(stem + ".md", markdown)
+  mpm_io.write_text(stem + ".md", markdown)
   results["markdown"] = markdown
   results["files"] = [stem + ".json", stem + ".md"]
   return results["files"]

@@ -1,5 +1,5 @@
-"""Where each simulator stays finite and physical, and where it breaks: the
-cases, the frame checks and the table of ``python -m experiments.stability``.
+"""Where each simulator stays finite and physical, and where it breaks
+(``python -m experiments.stability``).
 
 Runs the MPM and the learned simulator at the extremes of what a user may
 ask (particle counts, obstacle sizes at both ends of the ramp, friction
@@ -16,24 +16,26 @@ the training distribution) and checks every stored frame:
 The first frame that fails a check is reported with what failed; a run that
 raises (the MPM's own blow-up detection, a refused scene) is reported with
 its message. Nothing is saved as data: only the table
-(``stability.csv``, ``stability.md``) is written.
+(``stability.csv``, ``stability.md``) and one picture per case are written.
 """
 
 import dataclasses
 import math
+import os
 import time
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
+import tqdm
 
 import mpm
 from experiments import figures
+from experiments.studies import settings
 from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
-from gnsjax import train
+from gnsjax import run as run_lib
 from mpm import io as mpm_io
 
-GRAVITY = 9.81        # m/s^2
 MAX_INSIDE = 0.02     # fraction of the sand allowed inside solids
 SPEED_MARGIN = 1.25   # times the free-fall speed from the domain's top
 
@@ -77,7 +79,7 @@ def check_frames(positions: np.ndarray, frames: np.ndarray,
   dt = np.diff(frames)[:, None] * scene.frame_dt
   speed = np.max(np.linalg.norm(np.diff(x, axis=0), axis=-1) / dt, axis=1,
                  initial=0.0) if len(x) > 1 else np.zeros(0)
-  bound = SPEED_MARGIN * math.sqrt(2 * GRAVITY * scene.domain.height)
+  bound = SPEED_MARGIN * math.sqrt(2 * mpm.GRAVITY * scene.domain.height)
   inside_all = np.full(len(x), np.nan)
   outside_all = np.full(len(x), np.nan)
   inside_all[finite], outside_all[finite] = inside, outside
@@ -269,7 +271,7 @@ def run_mpm(case: Case) -> Outcome:
                  positions, frames)
 
 
-def run_gns(case: Case, run: train.Run) -> Outcome:
+def run_gns(case: Case, run: run_lib.Run) -> Outcome:
   """The MPM gives the start (its frames up to the input window's last);
   the learned simulator rolls on from there."""
   problem = run.problem
@@ -308,12 +310,13 @@ def picture(outcome: Outcome, path: str) -> str | None:
       outcome.scene, *mpm.boundary_particles(outcome.scene), chosen, path)
 
 
-def table(rows: Sequence[dict]) -> str:
+def report(summary: dict[str, Any]) -> str:
+  """The table of every case run (Markdown)."""
   lines = ["| case | what it pushes | particles | frames | status | first "
            "bad frame: what | max inside solids | max outside | max speed "
            "(m/s) | mean speed at the end (m/s) | wall (s) |",
            "|---" * 11 + "|"]
-  for r in rows:
+  for r in summary["rows"]:
     bad = (f"{r['break_frame']}: {r['what']}" if r["break_frame"] != "" else
            r["what"])
     inside = (f"{r['max_inside_solids']:.2%}"
@@ -325,3 +328,62 @@ def table(rows: Sequence[dict]) -> str:
                  f"{outside} | {r['max_speed_m_s']} | "
                  f"{r['final_speed_m_s']} | {r['wall_time_s']} |")
   return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ study ---
+
+# The learned simulator's case names (they do not depend on its spacing).
+GNS_CASE_NAMES = tuple(c.name for c in gns_cases(0.01))
+MPM_CASE_NAMES = tuple(c.name for c in mpm_cases())
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings(settings.Base):
+  """Which cases to run, and with which learned simulator."""
+  workdir: str = settings.field(
+      "experiments/pretrained/small",
+      "Trained run for the learned simulator's cases ('' to skip them).")
+  only: tuple[str, ...] | None = settings.field(
+      None, "Run only these cases (names; default: all).")
+
+  def validate(self):
+    if self.only is None:
+      return
+    known = MPM_CASE_NAMES + GNS_CASE_NAMES
+    unknown = sorted(set(self.only) - set(known))
+    if unknown:
+      raise settings.InputError(f"--only: unknown case(s) {unknown}; "
+                                f"allowed: {list(known)}")
+    needs_run = sorted(set(self.only) & set(GNS_CASE_NAMES))
+    if needs_run and not self.workdir:
+      raise settings.InputError(
+          f"--only={','.join(needs_run)}: learned-simulator case(s) need "
+          "--workdir (a trained run)")
+
+
+def run(s: Settings, out_dir: str) -> dict[str, Any]:
+  """Runs the cases; writes ``stability.csv``, ``stability.md`` and
+  ``<case>.png`` into ``out_dir``.
+
+  Returns:
+    {"rows": one row per case, "broken": the cases not ok}.
+  """
+  cases = mpm_cases()
+  trained = None
+  if s.workdir:
+    trained = run_lib.load_run(s.workdir)
+    cases += gns_cases(trained.config.dataset.spacing)
+  if s.only is not None:
+    cases = [c for c in cases if c.name in s.only]
+  os.makedirs(out_dir, exist_ok=True)
+  rows = []
+  for case in tqdm.tqdm(cases, unit="case"):
+    outcome = (run_mpm(case) if case.simulator == "mpm" else
+               run_gns(case, trained))
+    picture(outcome, os.path.join(out_dir, f"{case.name}.png"))
+    rows.append(outcome.row)
+    mpm_io.write_csv(os.path.join(out_dir, "stability.csv"), rows)
+  summary = {"rows": rows,
+             "broken": [r["case"] for r in rows if r["status"] != "ok"]}
+  mpm_io.write_text(os.path.join(out_dir, "stability.md"), report(summary))
+  return summary

@@ -1,4 +1,4 @@
-"""Tests for `experiments.benchmarks.timing`."""
+"""Tests for `experiments.timing`."""
 
 import json
 import os
@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.benchmarks import timing
+from experiments import timing
 from tests.experiments.benchmarks import fixtures
 
 

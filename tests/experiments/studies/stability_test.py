@@ -1,4 +1,4 @@
-"""Tests for `experiments.extremes`: the frame checks on synthetic runs, and
+"""Tests for `experiments.studies.stability`: the frame checks on synthetic runs, and
 one real case of each simulator through the table."""
 
 import math
@@ -9,7 +9,7 @@ from absl.testing import absltest
 import numpy as np
 
 import mpm
-from experiments import extremes
+from experiments.studies import stability
 
 # A floor 5 cm high with one block on it; sand is 1 cm apart.
 SCENE = mpm.Scene.from_dict({
@@ -31,14 +31,14 @@ def _resting(frames=6, n=100):
 class CheckFramesTest(absltest.TestCase):
 
   def test_a_physical_run_passes(self):
-    check = extremes.check_frames(_resting(), np.arange(6), SCENE)
+    check = stability.check_frames(_resting(), np.arange(6), SCENE)
     self.assertTrue(check.ok)
     self.assertEqual((check.max_inside, check.max_outside, check.max_speed,
                       check.final_speed), (0.0, 0.0, 0.0, 0.0))
     # Sand still creeping at the end (a deposit that never settles).
     x = _resting()
     x[-1] += [0.001, 0.0]
-    check = extremes.check_frames(x, np.arange(6), SCENE)
+    check = stability.check_frames(x, np.arange(6), SCENE)
     self.assertAlmostEqual(check.final_speed, 0.001 / SCENE.frame_dt)
 
   def test_each_break_is_found_at_its_first_frame(self):
@@ -53,36 +53,36 @@ class CheckFramesTest(absltest.TestCase):
     x = _resting(); x[:, 5] = [0.1, 0.07]             # inside the block
     x[:, 6] = [0.11, 0.06]
     cases.append((x, None, None))                     # 2%: allowed
-    bound = extremes.SPEED_MARGIN * math.sqrt(2 * 9.81 * 0.3)
+    bound = stability.SPEED_MARGIN * math.sqrt(2 * 9.81 * 0.3)
     x = _resting(); x[5:, 9, 0] += 1.1 * bound * SCENE.frame_dt
     cases.append((x, 15, "above"))
     for x, frame, reason in cases:
-      check = extremes.check_frames(x, frames, SCENE)
+      check = stability.check_frames(x, frames, SCENE)
       self.assertEqual(check.frame, frame, reason)
       if reason:
         self.assertIn(reason, check.reason)
     # The worst values are those of the finite frames.
     x = _resting(); x[2:, :3] = [0.3, 0.03]; x[4, 0] = np.inf
-    check = extremes.check_frames(x, frames, SCENE)
+    check = stability.check_frames(x, frames, SCENE)
     self.assertEqual(check.frame, 12)
     self.assertAlmostEqual(check.max_inside, 0.03)
 
   def test_speed_uses_the_time_between_stored_frames(self):
     # Every third frame stored (a learned step of 3 frames): 3 frame times
     # between entries, so a move of 2 bounds' worth of one frame is slow.
-    bound = extremes.SPEED_MARGIN * math.sqrt(2 * 9.81 * 0.3)
+    bound = stability.SPEED_MARGIN * math.sqrt(2 * 9.81 * 0.3)
     x = _resting()
     x[3:, 0, 0] += 2 * bound * SCENE.frame_dt
-    self.assertTrue(extremes.check_frames(x, np.arange(0, 18, 3),
+    self.assertTrue(stability.check_frames(x, np.arange(0, 18, 3),
                                            SCENE).ok)
-    self.assertFalse(extremes.check_frames(x, np.arange(6), SCENE).ok)
+    self.assertFalse(stability.check_frames(x, np.arange(6), SCENE).ok)
 
 
 class CasesTest(absltest.TestCase):
 
   def test_every_mpm_case_builds(self):
     names = set()
-    for case in extremes.mpm_cases():
+    for case in stability.mpm_cases():
       self.assertNotIn(case.name, names)
       names.add(case.name)
       try:
@@ -94,13 +94,13 @@ class CasesTest(absltest.TestCase):
       self.assertAlmostEqual(scene.dx, 2 * scene.granular.spacing)
 
   def test_rows_of_a_run_a_blow_up_and_a_refused_scene(self):
-    outcome = extremes.run_mpm(extremes.Case("tiny", "mpm", "",
+    outcome = stability.run_mpm(stability.Case("tiny", "mpm", "",
                                                lambda: SCENE))
     row = outcome.row
     self.assertEqual((row["status"], row["frames"], row["particles"]),
                      ("ok", 5, 100), row)
     with tempfile.TemporaryDirectory() as d:
-      path = extremes.picture(outcome, os.path.join(d, "tiny.png"))
+      path = stability.picture(outcome, os.path.join(d, "tiny.png"))
       self.assertGreater(os.path.getsize(path), 1000)
 
     def blow_up(scene):
@@ -108,7 +108,7 @@ class CasesTest(absltest.TestCase):
 
     real, mpm.simulate = mpm.simulate, blow_up
     try:
-      row = extremes.run_mpm(extremes.Case("tiny", "mpm", "",
+      row = stability.run_mpm(stability.Case("tiny", "mpm", "",
                                              lambda: SCENE)).row
     finally:
       mpm.simulate = real
@@ -118,9 +118,9 @@ class CasesTest(absltest.TestCase):
                   row["what"])
 
     def off_the_ramp():
-      return extremes._scene(obstacles=[{"shape": "semicircle", "x": 1.6,
+      return stability._scene(obstacles=[{"shape": "semicircle", "x": 1.6,
                                           "radius": 0.05}])
-    row = extremes.run_mpm(extremes.Case("off", "mpm", "",
+    row = stability.run_mpm(stability.Case("off", "mpm", "",
                                            off_the_ramp)).row
     self.assertEqual(row["status"], "refused")
     self.assertIn("scene refused: ", row["what"])
