@@ -7,6 +7,7 @@ it refuses it raises as ``InputError`` (or ``app.UsageError``).
 """
 
 import dataclasses
+import math
 import os
 import sys
 import typing
@@ -14,6 +15,7 @@ from typing import Any, Callable
 
 from absl import app
 from absl import flags
+from absl import logging
 import jax
 
 import mpm
@@ -30,8 +32,8 @@ BAD_INPUT = (InputError, mpm_io.FormatError, app.UsageError)
 EXIT_BAD_INPUT = 2
 
 _VERBOSE = flags.DEFINE_bool(
-    "verbose", False, "On bad input, show the traceback, not only the "
-    "one-line error.")
+    "verbose", False, "Show INFO logs (the libraries' too), and on bad "
+    "input the traceback, not only the one-line error.")
 
 
 def _refuse(error: Exception) -> None:
@@ -39,17 +41,43 @@ def _refuse(error: Exception) -> None:
   sys.exit(EXIT_BAD_INPUT)
 
 
+def _non_finite_floats() -> list[str]:
+  """The float flags of this project's modules holding NaN or an infinity
+  (absl's bounds let NaN through; no float setting of ours means one)."""
+  bad = []
+  ours = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+  for module, module_flags in flags.FLAGS.flags_by_module_dict().items():
+    if not (module.startswith(("experiments", "gnsjax", "mpm")) or
+            os.path.abspath(module).startswith(ours + os.sep)):
+      continue
+    for flag in module_flags:
+      value = flag.value
+      if isinstance(value, float) and not math.isfinite(value):
+        bad.append(f"--{flag.name}={value}")
+  return bad
+
+
 def _parse_flags(argv: list[str]) -> list[str]:
+  # --verbose shows in every entry point's --help, beside its own flags.
+  flags.FLAGS.register_key_flag_for_module(sys.argv[0], flags.FLAGS["verbose"])
   try:
-    return flags.FLAGS(argv)
+    rest = flags.FLAGS(argv)
   except flags.Error as e:  # unknown flag, bad value, failed validator
     _refuse(e)
+  bad = _non_finite_floats()
+  if bad:
+    _refuse(InputError(f"{', '.join(sorted(set(bad)))}: allowed: a finite "
+                       "number"))
+  return rest
 
 
 def run(main: Callable[[list[str]], None]) -> None:
   """``app.run(main)``, bad input reported as ``error: <message>`` with exit
   code 2 (with its traceback under ``--verbose``)."""
   def checked(argv):
+    # INFO logs (orbax's checkpoint chatter, absl's) only under --verbose.
+    logging.set_verbosity(logging.INFO if _VERBOSE.value else
+                          logging.WARNING)
     try:
       return main(argv)
     except BAD_INPUT as e:

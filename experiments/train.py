@@ -15,6 +15,7 @@ import jax
 from ml_collections import config_flags
 
 from experiments import runtime
+from gnsjax import config as config_lib
 from gnsjax import distributed
 # gnsjax.train is imported in main, after the distributed runtime starts:
 # importing it (jax_md) initialises JAX's backend.
@@ -53,7 +54,7 @@ def main(argv):
   distributed.initialize(processes, _INIT_TIMEOUT_S.value)
   from gnsjax import train  # pylint: disable=g-import-not-at-top
   try:
-    train.check_config(_CONFIG.value)
+    config_lib.check_config(_CONFIG.value)
   except ValueError as e:
     raise runtime.InputError(f"--config: {e}") from e
   logging.info("devices: %s", jax.devices())

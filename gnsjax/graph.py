@@ -10,6 +10,17 @@ update that finds more edges than it holds sets an overflow flag under `jit`,
 and ``update_or_reallocate`` reallocates on the host, so no edge is ever
 dropped silently.
 
+The one overflow policy: no edge is ever dropped, and no step computed with
+a list that overflowed is kept. A program whose list overflowed is rerun
+from the first overflowed step with a larger list, never a smaller one.
+Where the program can be cut there, it is: the host rollouts
+(``gnsjax.rollout``) keep the steps before the overflow and resume from
+there (a chunk of a long rollout). A program that is one whole, a
+differentiable rollout for inverse design (``gnsjax.design.rollouts``) or
+training's pushforward steps (``gnsjax.train``), has no step to resume from
+whose gradient or noise stream would be the same, so it is rerun whole;
+each grows its list until the rerun fits.
+
 The function pair is ``allocate`` (host, sets capacities from example
 positions) and ``update`` (jittable, fixed capacities); ``allocate_batch`` and
 ``update_batch`` do the same for B windows with a leading batch axis, and

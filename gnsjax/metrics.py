@@ -19,6 +19,8 @@ Shapes: T steps, N sand particles. Positions in metres.
   deposit that should rest but jitters in place shows here, not in the MSE.
 """
 
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -150,3 +152,60 @@ def front_error_relative(pred: np.ndarray, true: np.ndarray,
   runout distance from the first frame ``start`` [N, 2] (a fraction)."""
   travelled = abs(float(runout(true) - runout(start)))
   return abs(float(runout(pred) - runout(true))) / max(travelled, 1e-9)
+
+
+def specific_kinetic_energy(positions: np.ndarray, times: np.ndarray,
+                            last_s: float = 0.25) -> float:
+  """Mean kinetic energy per unit mass (J/kg = m^2/s^2) of the sand over
+  the last ``last_s`` seconds of [T, N, 2] positions at ``times`` [T] (s):
+  the mean over steps and particles of |v|^2 / 2, with v the finite
+  difference between stored steps (LagrangeBench's ``e_kin``)."""
+  t = np.asarray(times, float)
+  if len(t) != len(positions) or len(t) < 2:
+    raise ValueError(f"specific_kinetic_energy: {len(positions)} steps and "
+                     f"{len(t)} times; need as many, at least 2")
+  first = min(int(np.searchsorted(t, t[-1] - last_s)), len(t) - 2)
+  x = np.asarray(positions[first:], float)
+  v = np.diff(x, axis=0) / np.diff(t[first:])[:, None, None]
+  return float(np.mean(0.5 * np.sum(v * v, axis=-1)))
+
+
+def kinetic_energy_ratio(pred: np.ndarray, true: np.ndarray,
+                         pred_times: np.ndarray, true_times: np.ndarray,
+                         last_s: float = 0.25, floor: float = 1e-8) -> float:
+  """Learned over true sand kinetic energy over the last ``last_s`` seconds
+  (:func:`specific_kinetic_energy` of each at its own stored times); 1 is
+  as calm as the truth. The truth's energy is floored at ``floor`` J/kg so
+  that a deposit at rest in both does not divide by zero."""
+  return (specific_kinetic_energy(pred, pred_times, last_s) /
+          max(specific_kinetic_energy(true, true_times, last_s), floor))
+
+
+def rest_time(positions: np.ndarray, times: np.ndarray,
+              speed: float = 0.01) -> float:
+  """The first time (s) from which the sand's mean speed stays at most
+  ``speed`` (m/s) to the end of [T, N, 2] positions at ``times`` [T]; inf
+  if it is not at rest at the end."""
+  t = np.asarray(times, float)
+  v = (np.linalg.norm(np.diff(np.asarray(positions, float), axis=0),
+                      axis=-1).mean(axis=1) / np.diff(t))
+  moving = np.nonzero(v > speed)[0]
+  if not len(moving):
+    return float(t[0])
+  if moving[-1] == len(v) - 1:
+    return math.inf
+  return float(t[moving[-1] + 1])
+
+
+def creep(positions: np.ndarray, times: np.ndarray, since: float) -> float:
+  """Mean displacement rate (m/s) of the sand from time ``since`` (s) to
+  the end: |x_end - x_since| averaged over particles, over the time
+  between. A deposit at rest creeps at 0; jitter in place does not add up
+  here, a slow drift does."""
+  t = np.asarray(times, float)
+  i = int(np.searchsorted(t, since))
+  if i >= len(t) - 1:
+    return 0.0
+  x = np.asarray(positions, float)
+  return float(np.mean(np.linalg.norm(x[-1] - x[i], axis=-1)) /
+               (t[-1] - t[i]))

@@ -51,6 +51,8 @@ class SceneNodes(NamedTuple):
       position.
     types: int32 [N]; moving: bool [N].
     solids: the scene's signed distance field.
+
+  A pytree: ``unroll`` takes it with device (or traced) arrays too.
   """
   window: np.ndarray
   types: np.ndarray
@@ -71,8 +73,7 @@ class Rollout(NamedTuple):
   depth: np.ndarray
 
 
-def unroll(predictor, params, window: jax.Array, types: jax.Array,
-           moving: jax.Array, solids: geometry.SDFGrid, nbrs,
+def unroll(predictor, params, scene: "SceneNodes", nbrs,
            context: simulator.Context, spec: graph.GraphSpec, length: int,
            project: bool = True, batched: bool = False, remat: bool = False,
            update_graph: bool = True):
@@ -87,9 +88,9 @@ def unroll(predictor, params, window: jax.Array, types: jax.Array,
 
   Args:
     predictor, params: the simulator (``simulator.ModelPredictor``).
-    window: [C, N, 2] input frames (batched: [C, B, N, 2]).
-    types: int32 [N]; moving: bool [N] (batched: [B, N]).
-    solids: the scene's SDF grid (batched: values [B, Gx, Gy, 3]).
+    scene: its start as arrays: window [C, N, 2] input frames (batched:
+      [C, B, N, 2]); types int32 [N] and moving bool [N] (batched: [B, N]);
+      solids, the SDF grid (batched: values [B, Gx, Gy, 3]).
     nbrs: from ``graph.allocate`` (batched: ``graph.allocate_batch``).
     context: statistics and bounds; spec: graph settings.
     length: L steps.
@@ -106,6 +107,7 @@ def unroll(predictor, params, window: jax.Array, types: jax.Array,
     of each step as the constraint left it, overflow bool [L] (of any
     scene), the last neighbour list, Projection with [L, (B,)] fields).
   """
+  window, types, moving, solids = scene
   n = window.shape[-2]
 
   def advance(w, nb, ty, mv, so):
@@ -241,12 +243,14 @@ def rollout(predictor, params, scene: SceneNodes, n_steps: int,
   allocate = functools.partial(graph.allocate, spec)
   if nbrs is None:
     nbrs = graph.rounded_up(allocate(jnp.asarray(window[-1])))
-  scan = functools.partial(
-      _unroll, predictor, params, types=jnp.asarray(types),
-      moving=jnp.asarray(moving), solids=jax.tree.map(jnp.asarray, solids),
-      context=context, spec=spec, length=chunk, project=project)
-  return Rollout(*_run_chunks(lambda w, nb: scan(window=w, nbrs=nb),
-                              allocate, window, nbrs, n_steps, chunk,
+  types, moving = jnp.asarray(types), jnp.asarray(moving)
+  solids = jax.tree.map(jnp.asarray, solids)
+
+  def scan(w, nb):
+    return _unroll(predictor, params, SceneNodes(w, types, moving, solids),
+                   nb, context, spec=spec, length=chunk, project=project)
+
+  return Rollout(*_run_chunks(scan, allocate, window, nbrs, n_steps, chunk,
                               on_reallocate))
 
 
@@ -312,13 +316,16 @@ def rollout_batch(predictor, params, scenes: Sequence[SceneNodes],
   allocate = functools.partial(graph.allocate_batch, spec)
   if nbrs is None:
     nbrs = graph.rounded_up(allocate(jnp.asarray(window[-1])))
-  scan = functools.partial(
-      _unroll, predictor, params, types=jnp.asarray(np.stack(padded_t)),
-      moving=jnp.asarray(np.stack(padded_m)), solids=solids, context=context,
-      spec=spec, length=chunk, project=project, batched=True)
-  positions, pushed, depth = _run_chunks(
-      lambda w, nb: scan(window=w, nbrs=nb), allocate, window, nbrs, n_steps,
-      chunk, on_reallocate)
+  types = jnp.asarray(np.stack(padded_t))
+  moving = jnp.asarray(np.stack(padded_m))
+
+  def scan(w, nb):
+    return _unroll(predictor, params, SceneNodes(w, types, moving, solids),
+                   nb, context, spec=spec, length=chunk, project=project,
+                   batched=True)
+
+  positions, pushed, depth = _run_chunks(scan, allocate, window, nbrs,
+                                         n_steps, chunk, on_reallocate)
   return [Rollout(np.ascontiguousarray(positions[:, b, :size]),
                   pushed[:, b], depth[:, b])
           for b, size in enumerate(sizes)]
@@ -365,7 +372,7 @@ def rollout_trajectory(model, params, t: mpm_io.Trajectory, problem,
   Args:
     model, params: the network and its parameters.
     t: the trajectory (its first (C - 1) k + 1 frames are the inputs).
-    problem: the run's ``train.Problem`` (stride, features, statistics).
+    problem: the run's ``gnsjax.run.Problem`` (stride, features, statistics).
     n_steps: learned steps (default: as many as the trajectory has frames
       for, ``predicted_frame_indices``).
     project: keep sand out of solids.

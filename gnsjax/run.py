@@ -69,9 +69,8 @@ class Problem:
   Attributes:
     stats: normalisation statistics per learned step, the training noise
       folded in if the run was trained so (what the model divides by).
-    bounds: [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m).
-    radius: connectivity radius R (m).
-    spec: the radius graph's static description.
+    spec: the radius graph's static description: the connectivity radius
+      R (m, ``radius``) and the domain (``bounds``) live there only.
     input_frames: C.
     frame_stride: k, stored frames per learned step.
     boundary_particles: whether boundary particles are graph nodes.
@@ -79,8 +78,6 @@ class Problem:
     noise_std: training noise, std of the last input velocity (m/step).
   """
   stats: features.Stats
-  bounds: np.ndarray
-  radius: float
   spec: graph.GraphSpec
   input_frames: int = 6
   frame_stride: int = 1
@@ -89,10 +86,19 @@ class Problem:
   noise_std: float = 0.0
 
   @property
+  def radius(self) -> float:
+    """Connectivity radius R (m)."""
+    return self.spec.radius
+
+  @property
+  def bounds(self) -> np.ndarray:
+    """float32 [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m)."""
+    return np.asarray(self.spec.bounds, np.float32)
+
+  @property
   def context(self) -> simulator.Context:
     return simulator.Context(
-        features.Stats(*(jnp.asarray(s) for s in self.stats)),
-        jnp.asarray(self.bounds, jnp.float32))
+        features.Stats(*(jnp.asarray(s) for s in self.stats)))
 
   def to_dict(self) -> dict:
     """JSON-able record, stored with every checkpoint (``from_dict``)."""
@@ -108,7 +114,7 @@ def _problem(config, stats: features.Stats, bounds, radius: float,
   spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
                          config.train.capacity_multiplier)
   m = config.model
-  return Problem(stats, bounds, radius, spec, config.train.input_frames,
+  return Problem(stats, spec, config.train.input_frames,
                  config.train.frame_stride, m.boundary_particles,
                  float(m.sdf_spacing or radius / 6), float(noise_std))
 

@@ -23,10 +23,8 @@ class Context(NamedTuple):
   Attributes:
     stats: normalisation statistics per learned step (noise folded in if
       the run was trained so).
-    bounds: [2, 2] domain [[x_min, x_max], [y_min, y_max]] (m).
   """
   stats: features.Stats
-  bounds: jax.Array
 
 
 class Graph(NamedTuple):

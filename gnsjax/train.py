@@ -1,7 +1,7 @@
 """Training the learned simulator:
 ``train_and_evaluate(config, data, workdir)``.
 
-The only module that reads a config. Each step: B windows (a pure function of
+Each step: B windows (a pure function of
 the step, see ``gnsjax.data.WindowDataset``), padded to a node bucket; random-
 walk noise from ``fold_in(key, step)``; a radius graph from the jax-md
 neighbour list (reallocated on the host when it overflows, never truncated);
@@ -22,7 +22,7 @@ each once) and all restore them.
 import contextlib
 import csv
 import functools
-import json
+import math
 import os
 import time
 from typing import Any
@@ -39,6 +39,7 @@ import tqdm
 
 from gnsjax import batching
 from gnsjax import checkpoint
+from gnsjax import config as config_lib
 from gnsjax import data
 from gnsjax import distributed
 from gnsjax import features
@@ -50,20 +51,12 @@ from gnsjax import run as run_lib
 from gnsjax import simulator
 from mpm import geometry as mpm_geometry
 from mpm import io as mpm_io
-from mpm import scene as mpm_scene
 
-# A config or checkpoint the user gave is wrong: entry points report it in one
-# line (experiments.runtime).
-InputError = mpm_scene.InputError
+InputError = config_lib.InputError
 
-# The run's pieces, defined in gnsjax.run; training creates and stores them.
-Problem = run_lib.Problem
-Run = run_lib.Run
-create_model = run_lib.create_model
-load_problem = run_lib.load_problem
-load_run = run_lib.load_run
-problem_from_dict = run_lib.problem_from_dict
-noise_std_of = run_lib.noise_std_of
+
+class DivergedError(InputError):
+  """The loss turned NaN or infinite: the config's step sizes diverge."""
 
 
 @flax.struct.dataclass
@@ -92,101 +85,6 @@ def create_optimizer(train_config) -> optax.GradientTransformation:
                      optax.adam(schedule))
 
 
-# The keys a training config must have (experiments/configs/paper.py).
-CONFIG_KEYS = {
-    "model": ("latent_size", "hidden_layers", "num_message_passing_steps",
-              "type_embedding_size", "split_first_layer",
-              "connectivity_radius", "boundary_particles", "sdf_spacing",
-              "smooth_cutoff"),
-    "train": ("seed", "batch_size", "num_steps", "input_frames",
-              "frame_stride", "noise_std", "noise_velocity_fraction",
-              "fold_noise", "motion_weighting", "pushforward_steps",
-              "pushforward_probability", "lr_init", "lr_min",
-              "lr_decay_steps", "clip_norm", "node_bucket",
-              "capacity_multiplier", "max_wall_time_s", "device_windows",
-              "init_from"),
-    "checkpoint": ("every_steps", "named_steps", "keep"),
-    "eval": ("every_steps", "num_windows", "rollout_steps", "num_rollouts"),
-}
-_OTHER_TOP_LEVEL = ("dataset", "workers", "log_every")
-
-
-def check_config(config) -> None:
-  """Raises InputError (a ValueError) naming any unknown or missing key."""
-  top = set(config.keys())
-  allowed = set(CONFIG_KEYS) | set(_OTHER_TOP_LEVEL)
-  if top - allowed:
-    raise InputError(f"config: unknown key(s) {sorted(top - allowed)}; "
-                     f"allowed: {sorted(allowed)}")
-  for section, keys in CONFIG_KEYS.items():
-    if section not in top:
-      raise InputError(f"config: missing section '{section}' with keys "
-                       f"{list(keys)}")
-    present = set(config[section].keys())
-    if present - set(keys):
-      raise InputError(f"config.{section}: unknown key(s) "
-                       f"{sorted(present - set(keys))}; allowed: {list(keys)}")
-    if set(keys) - present:
-      raise InputError(f"config.{section}: missing key(s) "
-                       f"{sorted(set(keys) - present)}")
-  if config.train.input_frames < 2:
-    raise InputError(f"config.train.input_frames = "
-                     f"{config.train.input_frames}; allowed: >= 2")
-  stride = config.train.frame_stride
-  if int(stride) != stride or stride < 1:
-    raise InputError(f"config.train.frame_stride = {stride}; allowed: an "
-                     "integer >= 1")
-  if config.train.pushforward_steps < 0 or not (
-      0.0 <= config.train.pushforward_probability <= 1.0):
-    raise InputError("config.train.pushforward_steps = "
-                     f"{config.train.pushforward_steps}, pushforward_"
-                     f"probability = {config.train.pushforward_probability}; "
-                     "allowed: steps >= 0, probability 0 to 1")
-  if not 0.0 <= config.model.smooth_cutoff <= 1.0:
-    raise InputError(f"config.model.smooth_cutoff = "
-                     f"{config.model.smooth_cutoff}; allowed: 0 (off) to 1 "
-                     "(a fraction of the connectivity radius)")
-  if not 0.0 <= config.train.motion_weighting <= 1.0:
-    raise InputError(f"config.train.motion_weighting = "
-                     f"{config.train.motion_weighting}; allowed: 0 to 1")
-
-
-def _config_dict(config) -> dict:
-  return json.loads(config.to_json_best_effort())
-
-
-def check_compatible(stored: dict, config) -> None:
-  """Refuses to resume a run whose model or data physics differ."""
-  current = _config_dict(config)
-  pairs = [("model", run_lib.model_config_dict(stored.get("model", {})),
-            run_lib.model_config_dict(current.get("model", {})))]
-  pairs += run_lib.physics_differences(stored, current)
-  for where, old, new in pairs:
-    if old != new:
-      raise InputError(
-          f"the checkpoint was trained with another config: its '{where}' is "
-          f"{old}, this config has {new}; use a new --workdir or the same "
-          "config")
-
-
-def check_fine_tuning(stored: dict, config) -> None:
-  """Refuses to start from a checkpoint of another architecture or physics.
-
-  The model may differ in ``smooth_cutoff`` only (it adds no parameter);
-  the data and the inputs (``train.input_frames``, ``frame_stride``) must
-  be the same.
-  """
-  old = run_lib.model_config_dict(stored.get("model", {}))
-  new = run_lib.model_config_dict(_config_dict(config)["model"])
-  old["smooth_cutoff"] = new["smooth_cutoff"]
-  compatible = dict(stored, model=old)
-  try:
-    check_compatible(compatible, config)
-  except InputError as e:
-    raise InputError(f"config.train.init_from = {config.train.init_from!r}: "
-                     f"{e}") from None
-
-
 def _mesh():
   # Every process's devices: jax.devices() is the same list in all of them.
   devices = np.array(jax.devices())
@@ -196,10 +94,10 @@ def _mesh():
 class Trainer:
   """Compiled pieces of a run; see :func:`train_and_evaluate`."""
 
-  def __init__(self, config, problem: Problem):
+  def __init__(self, config, problem: run_lib.Problem):
     self.config = config
     self.problem = problem
-    self.model = create_model(config.model)
+    self.model = run_lib.create_model(config.model)
     self.tx = create_optimizer(config.train)
     self.mesh = _mesh()
     self.batch_sharding = jax.sharding.NamedSharding(
@@ -384,20 +282,23 @@ class Trainer:
     nbrs = self._pushforward_nbrs.get(n)
     if nbrs is None:
       nbrs = self._allocate("pushforward", window[-1])
-    for _ in range(3):
+    while True:  # the overflow policy of gnsjax.graph: rerun, grown
       positions, carried, overflow, nbrs, _ = self._unroll(
-          params, window, types, moving, solids, nbrs, self.problem.context,
-          spec=spec, length=steps, project=True, batched=True)
+          params, rollout_lib.SceneNodes(window, types, moving, solids),
+          nbrs, self.problem.context, spec=spec, length=steps, project=True,
+          batched=True)
       if not bool(jnp.any(overflow)):
         break
-      # Grow the list (never shrinking it) until it holds every step's
-      # edges; the steps after an overflow are only approximately right,
-      # hence the retry.
+      # Size the list from every step's frames (the steps after an
+      # overflow are only approximately right, hence the rerun).
+      grown = False
       for frame in [window[-1]] + list(positions):
-        nbrs, _ = graph.update_or_reallocate(spec, frame, nbrs, batched=True)
-    else:
-      raise RuntimeError("pushforward: neighbour list overflowed after 3 "
-                         "reallocations")
+        nbrs, reallocated = graph.update_or_reallocate(spec, frame, nbrs,
+                                                       batched=True)
+        grown |= reallocated
+      if not grown:
+        raise RuntimeError("pushforward: the neighbour list overflowed, "
+                           "yet holds every step's edges")
     self._pushforward_nbrs[n] = nbrs
     frames = jnp.concatenate([window[:-1], carried, positions[-1:]], 0)
     return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
@@ -494,7 +395,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   calls it with the same arguments; ``workdir`` and ``data_dir`` must be on
   a filesystem they share.
   """
-  check_config(config)
+  config_lib.check_config(config)
   distributed.check_supported(config, jax.process_count())
   os.makedirs(workdir, exist_ok=True)
   cfg, tcfg = config, config.train
@@ -504,19 +405,20 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   lead = jax.process_index() == 0  # writes the logs
   mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
                             cfg.checkpoint.named_steps, cfg.checkpoint.keep)
-  config_dict = _config_dict(config)
+  config_dict = config_lib.config_dict(config)
   stored = None
   if mngr.latest_step() is not None:
-    check_compatible(checkpoint.read_config(mngr, mngr.latest_step()), config)
+    config_lib.check_compatible(
+        checkpoint.read_config(mngr, mngr.latest_step()), config)
     stored = checkpoint.read_stats(mngr, mngr.latest_step())
   start_from = None
   if stored is None and tcfg.init_from:
     start_from = run_lib.load_run(tcfg.init_from)
-    check_fine_tuning(start_from.config.to_dict(), config)
+    config_lib.check_fine_tuning(start_from.config.to_dict(), config)
     stored = start_from.problem.to_dict()
   # A resumed (or fine-tuned) model keeps the statistics it was trained with.
-  problem = (problem_from_dict(config, stored) if stored is not None else
-             load_problem(data_dir, config))
+  problem = (run_lib.problem_from_dict(config, stored) if stored is not None
+             else run_lib.load_problem(data_dir, config))
   trainer = Trainer(config, problem)
   state = trainer.init_state(tcfg.seed)
   if start_from is not None:
@@ -593,6 +495,16 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
           pushforward=push)
       state, step_metrics = trainer.train_step(state, graphs, target)
       done = step + 1
+      loss = float(step_metrics["loss"])
+      if not math.isfinite(loss):
+        # Nothing of this step or later is saved: the latest checkpoint
+        # keeps the last finite parameters.
+        mngr.wait_until_finished()
+        raise DivergedError(
+            f"{workdir}: the training loss is {loss} at step {done}; "
+            f"stopped, the latest checkpoint (step {mngr.latest_step()}) "
+            "holds the last finite parameters (a lower "
+            "config.train.lr_init or clip_norm may help)")
       if done % cfg.log_every == 0 or done == tcfg.num_steps:
         now = time.perf_counter()
         metrics = {k: float(v) for k, v in step_metrics.items()}

@@ -10,10 +10,10 @@ at any moment is resumed by running it again: finished parts are kept, half-
 written temporary files are discarded, nothing is duplicated.
 
 Worker processes die with the generator (even on kill -9), so none is left
-writing parts after it. One generator runs per directory at a time: it holds
-an exclusive ``flock`` on the directory, and a second one fails at once. Temp
-files carry their writer's host and pid, and a rerun removes only this
-host's whose writer is gone.
+writing parts after it. One generator runs per directory at a time: it
+holds an exclusive ``flock`` on the directory, and a second one fails at
+once. Temp files carry their writer's host and pid, and a rerun removes
+only this host's whose writer is gone (the machinery: ``mpm.workers``).
 
 Sharded (``generate(..., shard=Shard(i, N))``, one process per share, on one
 host or several sharing a filesystem): share i is the trajectories k of the
@@ -31,29 +31,20 @@ training never sees) and rectangle position (x = 0.6, 1.0, 1.3). Each test
 trajectory records its ``group`` in the scene name.
 """
 
-import concurrent.futures
-import contextlib
-import ctypes
 import dataclasses
-import glob
+import functools
 import json
-import multiprocessing
 import os
 import shutil
-import signal
-import socket
-import sys
-import threading
-import time
 from typing import Callable, Sequence
 
-import jax
 import numpy as np
 
 from mpm import io as mpm_io
 from mpm import sampler
 from mpm import scene as scene_lib
 from mpm import simulation
+from mpm import workers as workers_lib
 
 PAPER_SPACING = 0.005
 TEST_PARTICLES = (700, 1000, 1500)
@@ -223,100 +214,10 @@ def check_target(spec: DatasetSpec, out_dir: str) -> None:
           "config")
 
 
-_PR_SET_PDEATHSIG = 1  # linux/prctl.h
-
-
-def _die_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
-  """Ends this worker process when the process ``parent_pid`` dies.
-
-  Linux: the kernel sends SIGKILL at the parent's death (PR_SET_PDEATHSIG).
-  Elsewhere a daemon thread polls ``os.getppid()``: an orphan is reparented.
-  """
-  if sys.platform.startswith("linux"):
-    try:
-      libc = ctypes.CDLL(None, use_errno=True)
-      ok = libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
-    except (OSError, AttributeError):
-      ok = False
-    if ok:
-      if os.getppid() != parent_pid:  # it died before prctl took effect
-        os._exit(1)  # pylint: disable=protected-access
-      return
-
-  def watch():
-    while os.getppid() == parent_pid:
-      time.sleep(poll_s)
-    os._exit(1)  # pylint: disable=protected-access
-
-  threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
-
-
-def _init_worker(cache_dir: str | None, parent_pid: int) -> None:
-  _die_with_parent(parent_pid)
-  if cache_dir:
-    jax.config.update("jax_compilation_cache_dir", cache_dir)
-
-
-def _pid_alive(pid: int) -> bool:
-  try:
-    os.kill(pid, 0)
-  except ProcessLookupError:
-    return False
-  except PermissionError:
-    return True  # someone else's process
-  return True
-
-
-def _remove_stale_temps(parts_dir: str) -> None:
-  """Removes temp files (``mpm_io.temp_path``) whose writer is gone.
-
-  Only this host's are judged (a pid means nothing on another host); the
-  others' are left to their writers, and to ``assemble``.
-  """
-  here = socket.gethostname()
-  for path in glob.glob(os.path.join(parts_dir, "*.tmp-*")):
-    host, pid = mpm_io.temp_writer(path)
-    if host not in (None, here.replace("/", "_")):
-      continue
-    if pid is None or not _pid_alive(pid):
-      with contextlib.suppress(FileNotFoundError):
-        os.remove(path)  # half-written by a killed run
-
-
-class GeneratorBusyError(RuntimeError):
-  """Another generator holds the dataset directory."""
-
-
-@contextlib.contextmanager
-def _locked(path: str, busy: str, shared: bool = False):
-  """Holds a POSIX ``flock`` on ``path`` (a directory, or a file created
-  for it), exclusive or ``shared``; GeneratorBusyError(``busy``) if it is
-  taken. The kernel releases it when the holder dies, however it dies.
-  """
-  try:
-    import fcntl  # pylint: disable=g-import-not-at-top
-  except ImportError:  # not POSIX: no lock
-    yield
-    return
-  if os.path.isdir(path):
-    fd = os.open(path, os.O_RDONLY)
-  else:
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-  try:
-    try:
-      fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
-                  | fcntl.LOCK_NB)
-    except BlockingIOError:
-      raise GeneratorBusyError(busy) from None
-    yield
-  finally:
-    os.close(fd)
-
-
 def _exclusive(out_dir: str):
   """Holds an exclusive lock on the directory ``out_dir``: no other
   generator, sharded or not, runs on it meanwhile."""
-  return _locked(out_dir, f"{out_dir}: another generator is running on this "
+  return workers_lib.locked(out_dir, f"{out_dir}: another generator is running on this "
                  "directory; wait for it (or kill it) and rerun")
 
 
@@ -377,7 +278,7 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
 
   Raises:
     InputError: ``out_dir`` holds a dataset or parts of another spec.
-    GeneratorBusyError: another generator is running on ``out_dir`` (for
+    workers_lib.GeneratorBusyError: another generator is running on ``out_dir`` (for
       a shard: one that is not sharded, or on the same shard).
   """
   check_target(spec, out_dir)
@@ -418,19 +319,15 @@ def _simulate_all(todo, parts_dir, workers, compilation_cache, on_done):
     for it in todo:
       on_done(_simulate_part(it, parts_dir))
     return
-  context = multiprocessing.get_context("spawn")  # JAX is not fork-safe
-  with concurrent.futures.ProcessPoolExecutor(
-      workers, mp_context=context, initializer=_init_worker,
-      initargs=(compilation_cache, os.getpid())) as pool:
-    futures = [pool.submit(_simulate_part, it, parts_dir) for it in todo]
-    for future in concurrent.futures.as_completed(futures):
-      on_done(future.result())
+  workers_lib.map_in_processes(
+      functools.partial(_simulate_part, parts_dir=parts_dir), todo, workers,
+      compilation_cache, on_done)
 
 
 def _generate(spec, out_dir, workers, progress, compilation_cache) -> dict:
   parts_dir = os.path.join(out_dir, "parts")
   os.makedirs(parts_dir, exist_ok=True)
-  _remove_stale_temps(parts_dir)
+  workers_lib.remove_stale_temps(parts_dir)
   items = plan(spec)
   _simulate_items(spec, items, parts_dir, workers, progress,
                   compilation_cache)
@@ -460,17 +357,17 @@ def _generate_shard(spec, out_dir, workers, progress, compilation_cache,
                     shard: Shard) -> dict:
   # Shards share the directory (a shared lock: an unsharded generator or an
   # assembly waits for all of them) and each holds its own share.
-  with _locked(out_dir, f"{out_dir}: a generator that is not sharded (or "
+  with workers_lib.locked(out_dir, f"{out_dir}: a generator that is not sharded (or "
                "an assembly) is running on this directory; wait for it and "
                "rerun", shared=True):
     parts_dir = os.path.join(out_dir, "parts")
     os.makedirs(parts_dir, exist_ok=True)
     lock = os.path.join(parts_dir,
                         f".shard-{shard.index}-of-{shard.count}.lock")
-    with _locked(lock, f"{out_dir}: shard {shard} is already being "
+    with workers_lib.locked(lock, f"{out_dir}: shard {shard} is already being "
                  "generated by another process; wait for it (or kill it) "
                  "and rerun"):
-      _remove_stale_temps(parts_dir)
+      workers_lib.remove_stale_temps(parts_dir)
       items = shard.take(plan(spec))
       _simulate_items(spec, items, parts_dir, workers, progress,
                       compilation_cache)
@@ -487,7 +384,7 @@ def assemble_parts(spec: DatasetSpec, out_dir: str) -> dict:
   Raises:
     InputError: parts are missing (naming how many and the first ones), or
       ``out_dir`` holds a dataset or parts of another spec.
-    GeneratorBusyError: a generator is still running on ``out_dir``.
+    workers_lib.GeneratorBusyError: a generator is still running on ``out_dir``.
   """
   check_target(spec, out_dir)
   meta_path = os.path.join(out_dir, "metadata.json")
@@ -498,7 +395,7 @@ def assemble_parts(spec: DatasetSpec, out_dir: str) -> dict:
     raise scene_lib.InputError(
         f"--assemble: {out_dir} holds no parts; generate them first (with "
         "--shard=i/N for each i)")
-  with _locked(out_dir, f"{out_dir}: a generator is still running on this "
+  with workers_lib.locked(out_dir, f"{out_dir}: a generator is still running on this "
                "directory; wait for every shard to finish, then assemble"):
     if os.path.exists(meta_path):
       return mpm_io.read_json(meta_path)

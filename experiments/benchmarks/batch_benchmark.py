@@ -15,8 +15,8 @@ from typing import Any, Callable
 
 import jax.numpy as jnp
 
-from experiments import timing
 import mpm
+from experiments import timing
 from mpm import simulation
 
 # The H100 target of issue #15 (not measurable without a GPU).

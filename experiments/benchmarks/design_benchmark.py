@@ -4,7 +4,7 @@
 
 ``run_benchmark(out_dir)`` measures, in one run on this machine, for the MPM
 and the GNS on the small config's scene (250 particles, the shipped model
-``tasks.PRETRAINED``, loaded with ``train.load_run``) and on a paper scene
+``tasks.PRETRAINED``, loaded with ``run_lib.load_run``) and on a paper scene
 (1000 particles; the paper-sized GNS of ``configs/paper.py`` with untrained
 weights, since cost does not depend on the weights), each through the
 ``gnsjax.design`` rollouts (``mpm_positions``, ``gns_positions``: the
@@ -38,7 +38,7 @@ from experiments.configs import paper as paper_config
 from gnsjax import design
 from gnsjax import features
 from gnsjax import models
-from gnsjax import train
+from gnsjax import run as run_lib
 from gnsjax.design import objectives
 from gnsjax.design import study
 
@@ -59,7 +59,7 @@ def _memory_gb(program: timing.Compiled) -> dict:
 def untrained_gns(placement: design.Placement, config):
   """A GNS of ``config`` (``experiments/configs``) with untrained weights,
   and its problem on the placement's domain: (model, params, problem)."""
-  model = train.create_model(config.model)
+  model = run_lib.create_model(config.model)
   params = models.init_params(
       model, jax.random.key(0),
       features.num_node_features(config.train.input_frames))
@@ -70,7 +70,7 @@ def untrained_gns(placement: design.Placement, config):
             "acc_mean": [0.0, 0.0], "acc_std": [1e-6, 1e-6],
             "bounds": [[0.0, domain.width], [0.0, domain.height]],
             "radius": config.dataset.connectivity_radius, "noise_std": 0.0}
-  return model, params, train.problem_from_dict(config, stored)
+  return model, params, run_lib.problem_from_dict(config, stored)
 
 
 def paper_gns(placement: design.Placement):

@@ -72,11 +72,11 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 
+from experiments import timing
 from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import gns_programs
 from experiments.benchmarks import gns_report
 from experiments.benchmarks import op_profile
-from experiments import timing
 
 
 @dataclasses.dataclass(frozen=True)

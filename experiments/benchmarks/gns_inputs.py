@@ -25,13 +25,13 @@ import os
 import jax.numpy as jnp
 import numpy as np
 
+import mpm
 from experiments.benchmarks import scenes
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import rollout as rollout_lib
 from gnsjax import simulator
-import mpm
 from mpm import geometry
 from mpm import io as mpm_io
 
@@ -102,8 +102,7 @@ class BenchGraph:
   @property
   def context(self) -> simulator.Context:
     return simulator.Context(
-        features.Stats(*(jnp.asarray(s, jnp.float32) for s in self.stats)),
-        jnp.asarray(self.bounds, jnp.float32))
+        features.Stats(*(jnp.asarray(s, jnp.float32) for s in self.stats)))
 
   def solids_at(self, spacing: float | None = None) -> geometry.SDFGrid:
     """The scene's SDF grid at ``spacing`` (m; default: ``solids``')."""

@@ -16,10 +16,11 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from experiments.benchmarks import gns_inputs
 from experiments import timing
+from experiments.benchmarks import gns_inputs
 from gnsjax import features
 from gnsjax import models
+from gnsjax import run as run_lib
 from gnsjax import simulator
 from gnsjax import train
 
@@ -146,7 +147,7 @@ class Runner:
 
   def __init__(self, config, g: gns_inputs.BenchGraph, params=None,
                padded: bool = False):
-    self.model = train.create_model(config.model)
+    self.model = run_lib.create_model(config.model)
     self.tx = train.create_optimizer(config.train)
     self.params = init_params(self.model) if params is None else params
     s, r = ((g.padded_senders, g.padded_receivers) if padded

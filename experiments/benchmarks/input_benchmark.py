@@ -29,6 +29,7 @@ from experiments import timing
 from experiments.configs import small
 from gnsjax import batching
 from gnsjax import data
+from gnsjax import run as run_lib
 from gnsjax import train
 
 
@@ -43,7 +44,7 @@ def run_benchmark(data_dir: str, out_dir: str, *, quick: bool = False,
   """
   config = small.get_config() if config is None else config
   config.model.boundary_particles = False
-  problem = train.load_problem(data_dir, config)
+  problem = run_lib.load_problem(data_dir, config)
   trainer = train.Trainer(config, problem)
   tcfg = config.train
   path = data.split_path(data_dir, "train")

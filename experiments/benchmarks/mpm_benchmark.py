@@ -36,9 +36,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.benchmarks import scenes
-from experiments import timing
 import mpm
+from experiments import timing
+from experiments.benchmarks import scenes
 
 # A granular box large enough for 5000 particles at 0.005 m spacing (the
 # default box holds ~3300 above the ramp); used for every row of the particle

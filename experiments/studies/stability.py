@@ -23,7 +23,7 @@ import dataclasses
 import math
 import os
 import time
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 import tqdm
@@ -38,6 +38,7 @@ from mpm import io as mpm_io
 
 MAX_INSIDE = 0.02     # fraction of the sand allowed inside solids
 SPEED_MARGIN = 1.25   # times the free-fall speed from the domain's top
+REST_SPEED = 0.01     # m/s: sand whose mean speed stays below this rests
 
 @dataclasses.dataclass(frozen=True)
 class Check:
@@ -49,6 +50,8 @@ class Check:
   max_outside: float
   max_speed: float
   final_speed: float     # mean sand speed over the last stored interval
+  rest_time: float = math.inf   # s; from then on mean speed <= REST_SPEED
+  creep: float = 0.0     # m/s, the sand's mean drift after rest_time
 
   @property
   def ok(self) -> bool:
@@ -66,7 +69,9 @@ def check_frames(positions: np.ndarray, frames: np.ndarray,
 
   Returns:
     The first failing frame and why, with the worst values seen over the
-    finite frames.
+    finite frames, and when the sand came to rest (mean speed at most
+    ``REST_SPEED`` from then on; inf if it never did) and how fast it
+    drifted afterwards.
   """
   x = np.asarray(positions, np.float64)
   frames = np.asarray(frames)
@@ -102,10 +107,16 @@ def check_frames(positions: np.ndarray, frames: np.ndarray,
   finite_speed = speed[np.isfinite(speed)]
   final_speed = (float(np.mean(np.linalg.norm(x[-1] - x[-2], axis=-1))
                        / dt[-1, 0]) if len(x) > 1 else 0.0)
+  rest, drift = math.inf, 0.0
+  if len(good) > 1 and np.all(finite):
+    times = frames * scene.frame_dt
+    rest = metrics.rest_time(x, times, REST_SPEED)
+    drift = metrics.creep(x, times, rest) if math.isfinite(rest) else 0.0
   return Check(None if frame is None else int(frame), reason,
                float(np.max(inside, initial=0.0)),
                float(np.max(outside, initial=0.0)),
-               float(np.max(finite_speed, initial=0.0)), final_speed)
+               float(np.max(finite_speed, initial=0.0)), final_speed,
+               rest, drift)
 
 
 # ------------------------------------------------------------------ cases ---
@@ -236,6 +247,8 @@ def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
       "max_speed_m_s": "" if check is None else round(check.max_speed, 3),
       "final_speed_m_s": "" if check is None else
                          round(check.final_speed, 4),
+      "rest_time_s": "" if check is None else round(check.rest_time, 3),
+      "creep_mm_s": "" if check is None else round(1e3 * check.creep, 3),
       "wall_time_s": round(wall, 1),
   }
 
@@ -314,8 +327,9 @@ def report(summary: dict[str, Any]) -> str:
   """The table of every case run (Markdown)."""
   lines = ["| case | what it pushes | particles | frames | status | first "
            "bad frame: what | max inside solids | max outside | max speed "
-           "(m/s) | mean speed at the end (m/s) | wall (s) |",
-           "|---" * 11 + "|"]
+           "(m/s) | mean speed at the end (m/s) | at rest from (s) | creep "
+           "after (mm/s) | wall (s) |",
+           "|---" * 13 + "|"]
   for r in summary["rows"]:
     bad = (f"{r['break_frame']}: {r['what']}" if r["break_frame"] != "" else
            r["what"])
@@ -326,7 +340,8 @@ def report(summary: dict[str, Any]) -> str:
     lines.append(f"| {r['case']} | {r['extreme']} | {r['particles']} | "
                  f"{r['frames']} | {r['status']} | {bad} | {inside} | "
                  f"{outside} | {r['max_speed_m_s']} | "
-                 f"{r['final_speed_m_s']} | {r['wall_time_s']} |")
+                 f"{r['final_speed_m_s']} | {r.get('rest_time_s', '')} | "
+                 f"{r.get('creep_mm_s', '')} | {r['wall_time_s']} |")
   return "\n".join(lines) + "\n"
 
 

@@ -157,7 +157,7 @@ class GNSRollout:
     Args:
       placement: what is designed.
       model: the learned simulator (``gnsjax.models``).
-      problem: ``gnsjax.train.Problem`` (statistics, bounds, graph spec,
+      problem: ``gnsjax.run.Problem`` (statistics, bounds, graph spec,
         stride, node choice).
       window: [C, Ns, 2] input frames (m), from ``mpm_window``.
       num_frames: stored frames T (default the scene's); the rollout needs
@@ -260,10 +260,11 @@ def gns_positions(sim: GNSRollout, params: Params, model_params, nbrs,
   nodes = jnp.concatenate([
       sim.window,
       jnp.broadcast_to(boundary_nodes[None], (c,) + boundary_nodes.shape)], 1)
+  scene = rollout_lib.SceneNodes(nodes, sim.types, sim.moving,
+                                 gns_solids(sim, params))
   positions, _, overflow, _, _ = rollout_lib.unroll(
-      sim.predictor, model_params, nodes, sim.types, sim.moving,
-      gns_solids(sim, params), nbrs, sim.context, sim.spec, sim.n_steps,
-      project=True, remat=remat, update_graph=update_graph)
+      sim.predictor, model_params, scene, nbrs, sim.context, sim.spec,
+      sim.n_steps, project=True, remat=remat, update_graph=update_graph)
   return (jnp.concatenate([sim.window, positions[:, :sim.n_sand]]),
           jnp.any(overflow))
 

@@ -60,6 +60,39 @@ class LayoutTest(absltest.TestCase):
     self.assertEqual(offenders, [])
 
 
+  def test_the_layout_of_issue_25_holds(self):
+    def lines(path):
+      with open(path) as f:
+        return sum(1 for _ in f)
+
+    def files(*parts):
+      return glob.glob(os.path.join(ROOT, *parts), recursive=True)
+
+    too_long = [os.path.relpath(p, ROOT)
+                for p in files("mpm", "**", "*.py") +
+                files("gnsjax", "**", "*.py") if lines(p) > 600]
+    self.assertEqual(too_long, [], "library files over 600 lines")
+    entry_points = [p for p in files("experiments", "*.py")
+                    if "runtime.run(main)" in open(p).read()]
+    self.assertGreater(len(entry_points), 10)
+    self.assertEqual([os.path.relpath(p, ROOT) for p in entry_points
+                      if lines(p) > 200], [], "entry points over 200 lines")
+    plotting = [os.path.relpath(p, ROOT) for p in
+                files("mpm", "**", "*.py") + files("gnsjax", "**", "*.py") +
+                files("experiments", "**", "*.py")
+                if re.search(r"^\s*(import|from) matplotlib", open(p).read(),
+                             re.M)]
+    self.assertEqual(plotting, ["experiments/figures.py"])
+    studies = [p for p in files("experiments", "studies", "*.py")
+               if not p.endswith(("__init__.py", "settings.py"))]
+    self.assertGreaterEqual(len(studies), 10)
+    for path in studies:
+      text = open(path).read()
+      for shape in ("class Settings(settings.Base)", "\ndef run(",
+                    "\ndef report("):
+        self.assertIn(shape, text, os.path.relpath(path, ROOT))
+
+
 class EntryPointsTest(absltest.TestCase):
 
   def setUp(self):

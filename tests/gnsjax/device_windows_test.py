@@ -6,6 +6,7 @@ import tempfile
 from absl.testing import absltest
 import numpy as np
 
+from gnsjax import run as run_lib
 from gnsjax import batching
 from gnsjax import data
 from gnsjax import train
@@ -22,7 +23,7 @@ class DeviceWindowsTest(absltest.TestCase):
     cls.data = fixtures.tiny_dataset()
     cls.config = fixtures.tiny_config(frame_stride=STRIDE)
     cls.config.model.boundary_particles = False
-    cls.problem = train.load_problem(cls.data, cls.config)
+    cls.problem = run_lib.load_problem(cls.data, cls.config)
     cls.trainer = train.Trainer(cls.config, cls.problem)
     path = data.split_path(cls.data, "train")
     c = cls.config.train.input_frames

@@ -1,5 +1,7 @@
 """Tests for `gnsjax.metrics` against hand computations."""
 
+import math
+
 from absl.testing import absltest
 import numpy as np
 
@@ -111,6 +113,32 @@ class MetricsTest(absltest.TestCase):
     self.assertEqual(metrics.final_speed(x[:, 1:], times), 0.0)
     with self.assertRaisesRegex(ValueError, "need as many"):
       metrics.final_speed(x, times[:-1])
+
+  def test_rest_metrics_by_hand(self):
+    # 3 particles: moving at 0.1 m/s in x until t = 0.5 s, then at rest
+    # except particle 0, which creeps at 1 mm/s.
+    times = np.round(np.arange(21) * 0.05, 10)
+    v = np.where(times <= 0.5, 0.1, 0.0)      # over the step ending then
+    x = np.zeros((len(times), 3, 2))
+    x[:, :, 0] = np.concatenate([[0.0], np.cumsum(v[1:] * 0.05)])[:, None]
+    x[:, 0, 0] += np.where(times > 0.5, (times - 0.5) * 0.001, 0.0)
+    self.assertAlmostEqual(metrics.rest_time(x, times, speed=0.01), 0.5)
+    self.assertEqual(metrics.rest_time(x, times, speed=1e-5), math.inf)
+    self.assertAlmostEqual(metrics.creep(x, times, since=0.5), 0.001 / 3)
+    # Over the last 0.25 s only the creeping particle moves.
+    self.assertAlmostEqual(metrics.specific_kinetic_energy(x, times, 0.25),
+                           0.5 * 0.001**2 / 3)
+    # Moving throughout at 0.1 m/s: 5e-3 J/kg.
+    moving = x.copy()
+    moving[:, :, 0] = times[:, None] * 0.1
+    self.assertAlmostEqual(
+        metrics.specific_kinetic_energy(moving, times, 0.25), 5e-3)
+    self.assertAlmostEqual(metrics.kinetic_energy_ratio(
+        moving, x, times, times), 5e-3 / (0.5 * 0.001**2 / 3))
+    # Truth exactly at rest: the floor keeps the ratio finite.
+    still = np.zeros_like(x)
+    self.assertAlmostEqual(metrics.kinetic_energy_ratio(
+        moving, still, times, times, floor=1e-6), 5e-3 / 1e-6)
 
   def test_constant_velocity_by_hand(self):
     # x = t^2 at frame t: the velocity changes, the baseline does not.

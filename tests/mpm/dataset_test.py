@@ -16,6 +16,7 @@ import numpy as np
 
 from mpm import dataset
 from mpm import io as mpm_io
+from mpm import workers as workers_lib
 
 SPEC = dataset.DatasetSpec(num_train=3, num_test=2, num_frames=12, seed=5,
                            spacing=0.01, connectivity_radius=0.03)
@@ -266,12 +267,12 @@ class DatasetTest(absltest.TestCase):
     with tempfile.TemporaryDirectory() as d:
       os.makedirs(os.path.join(d, "parts"))
       lock = os.path.join(d, "parts", ".shard-0-of-2.lock")
-      with dataset._locked(lock, "busy"):  # pylint: disable=protected-access
-        with self.assertRaisesRegex(dataset.GeneratorBusyError,
+      with workers_lib.locked(lock, "busy"):
+        with self.assertRaisesRegex(workers_lib.GeneratorBusyError,
                                     "shard 0/2 is already being generated"):
           dataset.generate(SPEC, d, workers=1, shard=dataset.Shard(0, 2))
       with dataset._exclusive(d):  # pylint: disable=protected-access
-        with self.assertRaisesRegex(dataset.GeneratorBusyError,
+        with self.assertRaisesRegex(workers_lib.GeneratorBusyError,
                                     "not sharded"):
           dataset.generate(SPEC, d, workers=1, shard=dataset.Shard(1, 2))
 
@@ -369,7 +370,7 @@ class ExclusiveGenerationTest(absltest.TestCase):
   def test_a_second_generator_on_the_same_directory_fails(self):
     with tempfile.TemporaryDirectory() as d:
       with dataset._exclusive(d):  # pylint: disable=protected-access
-        with self.assertRaisesRegex(dataset.GeneratorBusyError,
+        with self.assertRaisesRegex(workers_lib.GeneratorBusyError,
                                     "another generator"):
           dataset.generate(SPEC, d, workers=1)
       self.assertEqual(os.listdir(d), [])
@@ -391,7 +392,7 @@ class ExclusiveGenerationTest(absltest.TestCase):
       for path in (tagged_dead, tagged_live, other_host):
         with open(path, "wb") as f:
           f.write(b"\x89HDF half written")
-      dataset._remove_stale_temps(d)  # pylint: disable=protected-access
+      workers_lib.remove_stale_temps(d)
       self.assertCountEqual(os.listdir(d), [
           os.path.basename(p) for p in (live, tagged_live, other_host)])
 
@@ -401,9 +402,9 @@ class WorkerLifetimeTest(absltest.TestCase):
   def test_watchdog_ends_an_orphan_where_prctl_is_missing(self):
     child = (
         "import sys, time\n"
-        "from mpm import dataset\n"
+        "from mpm import workers\n"
         "sys.platform = 'darwin'  # no prctl: the watchdog thread\n"
-        "dataset._die_with_parent(int(sys.argv[1]), poll_s=0.05)\n"
+        "workers.die_with_parent(int(sys.argv[1]), poll_s=0.05)\n"
         "print('ready', flush=True)\n"
         "time.sleep(60)\n")
     parent = (

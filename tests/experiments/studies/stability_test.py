@@ -40,6 +40,15 @@ class CheckFramesTest(absltest.TestCase):
     x[-1] += [0.001, 0.0]
     check = stability.check_frames(x, np.arange(6), SCENE)
     self.assertAlmostEqual(check.final_speed, 0.001 / SCENE.frame_dt)
+    # At rest from the first frame, until a last step at 0.4 m/s.
+    self.assertEqual(check.rest_time, math.inf)
+    self.assertEqual(stability.check_frames(_resting(), np.arange(6),
+                                            SCENE).rest_time, 0.0)
+    x = _resting(8)
+    x[3:] += [0.0005, 0.0]     # moves in step 3 (0.2 m/s), then rests
+    check = stability.check_frames(x, np.arange(8), SCENE)
+    self.assertAlmostEqual(check.rest_time, 3 * SCENE.frame_dt)
+    self.assertEqual(check.creep, 0.0)
 
   def test_each_break_is_found_at_its_first_frame(self):
     frames = np.arange(10, 16)   # stored frame numbers, not indices

@@ -7,7 +7,7 @@ import mpm
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import models
-from gnsjax import train
+from gnsjax import run as run_lib
 from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
 
@@ -42,8 +42,8 @@ def tiny_gns(placement: placement_lib.Placement, num_frames: int,
   bounds = ((0.0, 1.65), (0.0, 1.19))
   stats = features.Stats(np.zeros(2, np.float32), np.full(2, 1e-3, np.float32),
                          np.zeros(2, np.float32), np.full(2, 1e-3, np.float32))
-  problem = train.Problem(stats, np.asarray(bounds, np.float32), 0.03,
-                          graph.GraphSpec(0.03, bounds), input_frames=C,
+  problem = run_lib.Problem(stats, graph.GraphSpec(0.03, bounds),
+                            input_frames=C,
                           frame_stride=frame_stride,
                           boundary_particles=boundary, sdf_spacing=0.005)
   if window is None:
