@@ -30,7 +30,7 @@ import mpm
 from experiments import column_collapse
 from experiments import evaluation
 from experiments import figures
-from experiments import pareto
+from experiments.studies import tradeoff
 from experiments import runtime
 from experiments import timing
 from mpm import io as mpm_io
@@ -78,7 +78,7 @@ def main(argv):
   spacings = _numbers("spacings", _SPACINGS.value, float)
   paper = _numbers("paper_scenes", _PAPER.value, int)
   paper_spacings = _numbers("paper_spacings", _PAPER_SPACINGS.value, float)
-  plan = pareto.study_scenes(max(paper) + 1) if paper else []
+  plan = tradeoff.study_scenes(max(paper) + 1) if paper else []
   runtime.enable_compilation_cache()
   os.makedirs(_OUT.value, exist_ok=True)
   env = timing.environment(quick=False, command=" ".join(
@@ -111,7 +111,7 @@ def main(argv):
   for index in paper:
     for spacing in tqdm.tqdm(paper_spacings, desc=plan[index].name,
                              unit="run"):
-      scene = pareto.at_spacing(plan[index], spacing)
+      scene = tradeoff.at_spacing(plan[index], spacing)
       x, wall = _simulate(scene)
       paper_rows.append({"scene": plan[index].name, "spacing_m": spacing,
                          "dx_m": scene.dx, "particles": x.shape[1],
