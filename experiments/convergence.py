@@ -27,7 +27,7 @@ import numpy as np
 import tqdm
 
 import mpm
-from experiments import column_collapse
+from experiments.studies import convergence as column_collapse
 from experiments import evaluation
 from experiments import figures
 from experiments.studies import tradeoff
