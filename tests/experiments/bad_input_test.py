@@ -186,11 +186,18 @@ ROWS = (
      "--gns small: trained at spacing 0.01 m, which is not in --spacings"),
     ("convergence_spacings", "experiments.convergence",
      ["--out={d}/out", "--spacings=0.01,0"],
-     "--spacings=0.01,0; allowed: comma-separated numbers > 0"),
+     "--spacings=0.0: allowed: > 0"),
     ("convergence_paper_scenes", "experiments.convergence",
      ["--out={d}/out", "--paper_scenes=0,x"],
-     "--paper_scenes=0,x; allowed: comma-separated indices >= 0 into the "
-     "paper's test plan"),
+     "--paper_scenes=0,x; allowed: comma-separated integers"),
+    # Issue 25: the flag is named, not the scene's key it would set.
+    ("convergence_height", "experiments.convergence",
+     ["--out={d}/out", "--height=0"], "--height=0.0: allowed: > 0"),
+    ("convergence_time", "experiments.convergence",
+     ["--out={d}/out", "--time=-1"], "--time=-1.0: allowed: > 0"),
+    ("convergence_aspect_ratios", "experiments.convergence",
+     ["--out={d}/out", "--aspect_ratios=nan"],
+     "--aspect_ratios=nan: allowed: a finite number"),
     ("inverse_design_x0_high", "experiments.inverse_design",
      ["--out={d}/out", "--x0=1.6"], "--x0=1.6; allowed: [0.5, 1.3] m"),
     # Issue 14: bad problems and designs, a missing budget.

@@ -1,7 +1,12 @@
-"""Tests for `experiments.studies.convergence`: the extrapolation, the runouts,
-the column scene, and the MPM's convergence at coarse resolutions."""
+"""Tests for `experiments.studies.convergence`: the extrapolation, the
+runouts, the column scene, the settings' refusals, ``run`` on a tiny case,
+and the MPM's convergence at coarse resolutions."""
 
 import functools
+import json
+import math
+import os
+import tempfile
 
 from absl.testing import absltest
 import numpy as np
@@ -72,6 +77,60 @@ class ConvergenceTest(absltest.TestCase):
     self.assertAlmostEqual(scene.boundary_friction, 0.7)
     # The column is filled: (0.05 / 0.005) x (0.1 / 0.005) particles.
     self.assertLen(mpm.granular_particles(scene), 10 * 20)
+
+
+class SettingsTest(absltest.TestCase):
+
+  def test_bad_settings_name_their_flags(self):
+    convergence.Settings()
+    bad = [({"height": 0.0}, "--height=0.0: allowed: > 0"),
+           ({"time": -1.0}, "--time=-1.0: allowed: > 0"),
+           ({"time": 0.02}, "--time=0.02: 8 frames of 2.5 ms; allowed: >= "
+            "0.0275 s"),
+           ({"aspect_ratios": (math.nan,)},
+            "--aspect_ratios=nan: allowed: a finite number"),
+           ({"cfl": 1.5}, "--cfl=1.5: allowed: <= 1"),
+           ({"spacings": (0.0025, 0.005)}, "--spacings=0.0025,0.005; "
+            "allowed: distinct spacings, coarse to fine"),
+           ({"spacings": (0.03, 0.01)}, "--spacings=0.03: too coarse for "
+            "the column of --height=0.1 and --aspect_ratios=1"),
+           ({"aspect_ratios": (40.0,)}, "--spacings=0.005: too coarse for "
+            r"the column of --height=0.1 and --aspect_ratios=40 \(0.0025 m "
+            r"wide\); allowed: <= 0.0025 m"),
+           ({"paper_scenes": (0, 100)}, "--paper_scenes=100: allowed: <= 99"),
+           ({"paper_scenes": (1,), "paper_spacings": (0.2, 0.01)},
+            "--paper_spacings=0.2: scene test/00001/semicircle "
+            r"\(--paper_scenes=1\) is refused at this spacing: solver.dx")]
+    for changes, message in bad:
+      with self.assertRaisesRegex(mpm.InputError, "^" + message,
+                                  msg=str(changes)):
+        convergence.Settings(**changes)
+    # No column: the paper scenes alone.
+    convergence.Settings(aspect_ratios=(), paper_scenes=(0,))
+
+
+class RunTest(absltest.TestCase):
+
+  def test_one_column_and_one_paper_scene(self):
+    s = convergence.Settings(spacings=(0.02,), time=0.03, paper_scenes=(0,),
+                             paper_spacings=(0.04,))
+    with tempfile.TemporaryDirectory() as d:
+      summary = convergence.run(s, d)
+      self.assertCountEqual(os.listdir(d), [
+          "convergence.csv", "convergence_paper.csv", "convergence.md",
+          "deposits.png", "environment.json"])
+      with open(os.path.join(d, "convergence.md")) as f:
+        self.assertEqual(f.read(), convergence.report(summary))
+      with open(os.path.join(d, "environment.json")) as f:
+        self.assertEqual(json.load(f)["settings"], s.to_dict())
+    (column,), (paper,) = summary["column"], summary["paper"]
+    self.assertEqual((column["aspect_ratio"], column["spacing_m"],
+                      column["particles"]), (1.0, 0.02, 25))
+    self.assertEqual((paper["scene"], paper["dx_m"]), ("test/00000/none",
+                                                       0.08))
+    self.assertGreater(paper["front_travel_m"], 0.5)
+    json.dumps(summary)
+    self.assertIn("Settings: `{", convergence.report(summary))
 
 
 # Spacings (m) of the coarse-resolution check: 1, 4 and 16 particles per
