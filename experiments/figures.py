@@ -306,7 +306,8 @@ def pareto(summary: Sequence[dict], path: str, batched: bool = False):
   """Error against cost (log-log): each configuration's worst front error
   over the study's scenes (filled) and median (hollow) against its seconds
   per trajectory, the Pareto front joined. ``summary`` from
-  ``experiments.pareto.summarise``; the reference (zero error) is left out.
+  ``experiments.studies.tradeoff.summarise``; the reference (zero error) is
+  left out.
   """
   key = "seconds_batched" if batched else "seconds"
   fig, ax = plt.subplots(figsize=(6.5, 4.5))

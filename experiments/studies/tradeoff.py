@@ -1,4 +1,5 @@
-"""The speed/accuracy study of ``python -m experiments.tradeoff``.
+"""Speed against accuracy: the MPM at several resolutions and learned
+simulators (``python -m experiments.tradeoff``).
 
 Every configuration (the MPM at several particle spacings, learned
 simulators) runs the same held-out scenes, and is scored against the MPM at
@@ -13,6 +14,10 @@ Scenes are the paper's test plan (``mpm.dataset.plan``: obstacle count 0-2,
 semicircle, rectangle at x = 0.6 / 1.0 / 1.3, the unseen triangle, 700 /
 1000 / 1500 particles at the paper's spacing) redrawn at each spacing with
 the same sand area (``at_spacing``).
+
+``run`` writes ``tradeoff.json`` (the table ``gnsjax.tradeoff`` reads),
+``points.csv``, ``rows.csv``, ``tradeoff.png`` (error against time,
+log-log, Pareto front marked), ``tradeoff_batched.png`` and ``tradeoff.md``.
 """
 
 import csv
@@ -24,9 +29,12 @@ import statistics
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import tqdm
 
 import mpm
+from experiments import figures
 from experiments import timing
+from experiments.studies import settings
 from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
@@ -325,16 +333,42 @@ def _fmt(v, spec=".3g"):
   return "-" if v is None else format(v, spec)
 
 
-def report(summary: Sequence[dict], table: dict[str, Any],
-           scenes: Sequence[mpm.Scene], tolerances: Sequence[float],
-           command: str) -> str:
-  """The Markdown report: the configurations, and which one to pick for
-  each test group (``scenes``: the study's scenes) and tolerance."""
+def picks(table: dict[str, Any], scenes: Sequence[mpm.Scene],
+          tolerances: Sequence[float]) -> list[dict[str, Any]]:
+  """What ``gnsjax.tradeoff.cheapest`` picks from ``table`` for every scene
+  (``"all"``) and for each test group (``scenes``: the study's scenes).
+
+  Returns:
+    One entry per group: ``scenes`` (its label) and ``choices``, per
+    tolerance the pick's ``name`` and ``seconds`` (None if none meets it).
+  """
+  groups = [("all", None)] + [
+      (g, next(s for s in scenes if dataset.group_of(s.name) == g))
+      for g in sorted({r["group"] for r in table["rows"]})]
+  out = []
+  for label, scene in groups:
+    choices = []
+    for t in tolerances:
+      try:
+        c = tradeoff.cheapest(table, t, scene=scene)
+        choices.append({"name": c.point["name"], "seconds": c.seconds})
+      except mpm.InputError:
+        choices.append(None)
+    out.append({"scenes": label, "choices": choices})
+  return out
+
+
+def report(summary: dict[str, Any]) -> str:
+  """The Markdown report of a :func:`run`'s summary: the configurations,
+  and which one to pick for each test group and tolerance."""
+  table, tolerances = summary["table"], summary["tolerances"]
   env = table["environment"]
+  asked = (f"Command: `{table['command']}`" if table.get("command") else
+           f"Settings: `{json.dumps(table.get('settings'))}`")
   lines = [
       "# Speed against accuracy: the MPM at several resolutions and the "
       "learned simulator", "",
-      f"Command: `{command}`", "",
+      asked, "",
       f"Machine: {env['platform']}, {env['cpu_count']} CPU cores, jax "
       f"{env['jax_version']} on {env['jax_backend']}; load average at the "
       f"start {env['load_average_start'][0]:.2f}, at the end "
@@ -360,7 +394,7 @@ def report(summary: Sequence[dict], table: dict[str, Any],
       "s | training h | front median / worst | deposit (m) median / worst "
       "| past median / worst | inside worst | Pareto |",
       "|---|---|---|---|---|---|---|---|---|---|---|"]
-  for e in summary:
+  for e in summary["configurations"]:
     training = (None if e["training_s"] is None else e["training_s"] / 3600)
     lines.append(
         f"| {e['label']} | {e['particles']} | {_fmt(e['seconds'])} | "
@@ -376,17 +410,151 @@ def report(summary: Sequence[dict], table: dict[str, Any],
             "time:", "",
             "| scenes | " + " | ".join(f"front <= {t:.0%}" for t in tolerances)
             + " |", "|---|" + "---|" * len(tolerances)]
-  groups = [("all", None)] + [
-      (g, next(s for s in scenes if
-               dataset.group_of(s.name) == g))
-      for g in sorted({r["group"] for r in table["rows"]})]
-  for label, scene in groups:
-    cells = []
-    for t in tolerances:
-      try:
-        c = tradeoff.cheapest(table, t, scene=scene)
-        cells.append(f"{c.point['name']} ({c.seconds:.2g} s)")
-      except mpm.InputError:
-        cells.append("none")
-    lines.append(f"| {label} | " + " | ".join(cells) + " |")
+  for group in summary["picks"]:
+    cells = ["none" if c is None else f"{c['name']} ({c['seconds']:.2g} s)"
+             for c in group["choices"]]
+    lines.append(f"| {group['scenes']} | " + " | ".join(cells) + " |")
   return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ study ---
+
+# Tolerances (front error, a fraction of the runout) of the report's picks.
+TOLERANCES = (0.05, 0.1, 0.2, 0.5)
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings(settings.Base):
+  """Which configurations run, on which scenes, timed how often."""
+  spacings: tuple[float, ...] = settings.field(
+      (0.02, 0.014, 0.01, 0.007, 0.005, 0.0035),
+      "MPM particle spacings (m) to measure; grid spacing twice each.",
+      lower=0, strict=True)
+  reference_spacing: float = settings.field(
+      0.0025, "Particle spacing (m) of the reference MPM.", lower=0,
+      strict=True)
+  scenes: int = settings.field(
+      14, "Held-out scenes (the test plan's first N; 7 groups).", lower=1)
+  num_frames: int = settings.field(600, "Frames per trajectory.",
+                                   lower=2 * COMPARE_EVERY)
+  repeats: int = settings.field(3, "Timed repeats.", lower=1)
+  gns: tuple[str, ...] = settings.field(
+      ("small=experiments/pretrained/small",),
+      "Learned simulators as NAME=WORKDIR ('' for none).", allow_empty=True)
+  batched_min_spacing: float = settings.field(
+      0.005, "Time the batched MPM only at spacings at least this coarse "
+      "(the finest batches take many minutes on a CPU).", lower=0)
+  command: str = settings.field(
+      "", "The command line that asked for the run, for the report ('': "
+      "the settings are reported).", flag=False)
+
+  def validate(self):
+    if self.reference_spacing > min(self.spacings):
+      raise settings.InputError(
+          f"--reference_spacing={self.reference_spacing:g} is coarser than "
+          f"--spacings' {min(self.spacings):g}; allowed: at most the finest "
+          "spacing")
+    names = [name for name, _ in self.gns_workdirs()]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+      raise settings.InputError(f"--gns: name(s) {twice} given twice; "
+                                "allowed: distinct names")
+
+  def gns_workdirs(self) -> list[tuple[str, str]]:
+    """(name, work directory) of each ``--gns`` item; InputError for an
+    item that is not NAME=WORKDIR."""
+    out = []
+    for item in self.gns:
+      name, sep, workdir = item.partition("=")
+      if not sep or not name or not workdir:
+        raise settings.InputError(f"--gns item {item!r}; allowed: "
+                                  "NAME=WORKDIR")
+      out.append((name, workdir))
+    return out
+
+
+def load_gns(s: Settings, spacings: Sequence[float]
+             ) -> list[tuple[str, str, run_lib.Run]]:
+  """The learned simulators of ``s.gns``, each checked to be trained at one
+  of ``spacings`` (m): its rollouts start from the MPM at its own spacing.
+
+  Raises:
+    InputError: naming ``--gns`` and ``--spacings``.
+  """
+  runs = []
+  for name, workdir in s.gns_workdirs():
+    run = run_lib.load_run(workdir)
+    spacing = run.config.dataset.spacing
+    if not any(abs(spacing - x) < 1e-9 for x in spacings):
+      raise settings.InputError(
+          f"--gns {name}: trained at spacing {spacing:g} m, which is not in "
+          f"--spacings ({', '.join(f'{x:g}' for x in spacings)}); its "
+          "rollouts start from the MPM at its own spacing")
+    runs.append((name, workdir, run))
+  return runs
+
+
+def run(s: Settings, out_dir: str) -> dict[str, Any]:
+  """Runs every configuration on the study's scenes and writes the table,
+  the report and the figures into ``out_dir`` (created after the runs).
+
+  The learned simulators are loaded and checked before anything runs. No
+  persistent compilation cache should be enabled: the compile times are
+  part of the figures, and a cached program would report its loading time.
+
+  Returns:
+    ``table`` (``tradeoff.json``'s content), ``configurations`` (per
+    configuration its cost, median and worst errors and Pareto membership:
+    :func:`summarise`), ``tolerances`` and ``picks`` (:func:`picks`).
+  """
+  spacings = sorted(set(s.spacings), reverse=True)
+  gns = load_gns(s, spacings)
+  env = timing.environment(quick=False)
+  scenes = study_scenes(s.scenes, s.num_frames)
+  # The paper's 1000-particle scene with one obstacle times each point.
+  timing_scene = next((i for i, x in enumerate(scenes)
+                       if x.granular.num_particles == 1000
+                       and len(x.obstacles) == 1), 0)
+  all_spacings = spacings + ([s.reference_spacing] if s.reference_spacing
+                             not in spacings else [])
+  bar = tqdm.tqdm(total=len(scenes) * (len(all_spacings) + len(gns)),
+                  unit="run")
+  mpm_runs = {}
+  for spacing in all_spacings:
+    bar.set_description(f"MPM {spacing:g} m")
+    mpm_runs[spacing] = run_mpm(
+        scenes, spacing, repeats=s.repeats, timing_scene=timing_scene,
+        batched=spacing >= s.batched_min_spacing,
+        progress=lambda: bar.update(1))
+  gns_runs = []
+  for name, workdir, trained in gns:
+    bar.set_description(f"GNS {name}")
+    start = next(r for x, r in mpm_runs.items()
+                 if abs(x - trained.config.dataset.spacing) < 1e-9)
+    gns_runs.append(run_gns(name, workdir, trained, start,
+                            repeats=s.repeats, timing_scene=timing_scene,
+                            batched=True, progress=lambda: bar.update(1)))
+  bar.close()
+  timing.end_environment(env)
+  reference = mpm_runs[s.reference_spacing]
+  frames = compare_frames(s.num_frames, [g.frames for g in gns_runs])
+  points = [r.point for r in mpm_runs.values()] + [g.point for g in gns_runs]
+  rows = table_rows(reference, list(mpm_runs.values()), gns_runs, frames)
+  table = {"points": points, "rows": rows, "frames": frames.tolist(),
+           "num_frames": s.num_frames, "reference": reference.point,
+           "scenes": [x.name for x in scenes], "environment": env,
+           "command": s.command, "settings": s.to_dict()}
+  configurations = summarise(points, rows)
+  summary = {"table": table, "configurations": configurations,
+             "tolerances": list(TOLERANCES),
+             "picks": picks(table, scenes, TOLERANCES)}
+  timing.write_results(out_dir, "tradeoff", False, dict(table),
+                       report(summary))
+  keys = list(dict.fromkeys(k for e in configurations for k in e))
+  mpm_io.write_csv(os.path.join(out_dir, "points.csv"),
+                   [{k: e.get(k) for k in keys} for e in configurations])
+  mpm_io.write_csv(os.path.join(out_dir, "rows.csv"), rows)
+  figures.pareto(configurations, os.path.join(out_dir, "tradeoff.png"))
+  figures.pareto(configurations,
+                 os.path.join(out_dir, "tradeoff_batched.png"), batched=True)
+  return summary

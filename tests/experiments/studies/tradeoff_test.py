@@ -1,14 +1,18 @@
-"""Tests for `experiments.pareto`, the study behind `experiments.tradeoff`:
-scenes redrawn at another spacing, the resolution-free errors by hand, and a
-tiny study end to end (the MPM at two spacings and the shipped model)."""
+"""Tests for `experiments.studies.tradeoff`, the study behind
+`experiments.tradeoff`: scenes redrawn at another spacing, the
+resolution-free errors by hand, the settings' refusals, a tiny study end to
+end (the MPM at two spacings and the shipped model) and ``run`` on one
+scene."""
 
 import math
+import os
+import tempfile
 
 from absl.testing import absltest
 import numpy as np
 
 import mpm
-from experiments import pareto
+from experiments.studies import tradeoff as study
 from gnsjax import metrics
 from gnsjax import run as run_lib
 from gnsjax import tradeoff
@@ -19,9 +23,9 @@ PRETRAINED = "experiments/pretrained/small"
 class ScenesTest(absltest.TestCase):
 
   def test_same_sand_area_and_solids_at_another_spacing(self):
-    for s in pareto.study_scenes(7, num_frames=40):
+    for s in study.study_scenes(7, num_frames=40):
       for spacing in (0.02, 0.01, 0.0035):
-        finer = pareto.at_spacing(s, spacing)
+        finer = study.at_spacing(s, spacing)
         n0, n1 = s.granular.num_particles, finer.granular.num_particles
         self.assertAlmostEqual(n1 * spacing**2, n0 * s.granular.spacing**2,
                                delta=spacing**2 / 2 + 1e-12)
@@ -32,24 +36,24 @@ class ScenesTest(absltest.TestCase):
                           s.name))
 
   def test_the_plan_covers_every_test_group(self):
-    groups = {s.name.split("/")[2] for s in pareto.study_scenes(14)}
+    groups = {s.name.split("/")[2] for s in study.study_scenes(14)}
     self.assertLen(groups, 7)
     self.assertIn("triangle", groups)
 
   def test_compare_frames_are_common_to_every_simulator(self):
-    np.testing.assert_array_equal(pareto.compare_frames(61), [15, 30, 45, 60])
+    np.testing.assert_array_equal(study.compare_frames(61), [15, 30, 45, 60])
     np.testing.assert_array_equal(
-        pareto.compare_frames(61, [range(18, 61, 3), range(6, 61)]), [30, 45,
-                                                                      60])
+        study.compare_frames(61, [range(18, 61, 3), range(6, 61)]),
+        [30, 45, 60])
     with self.assertRaisesRegex(ValueError, "no frame common"):
-      pareto.compare_frames(61, [[16, 17]])
+      study.compare_frames(61, [[16, 17]])
 
 
 class ScoreTest(absltest.TestCase):
 
   def setUp(self):
     super().setUp()
-    self.scene = pareto.study_scenes(1)[0]   # no obstacle
+    self.scene = study.study_scenes(1)[0]   # no obstacle
     rng = np.random.default_rng(0)
     start = np.stack([rng.uniform(1.25, 1.45, 300),
                       rng.uniform(0.6, 0.8, 300)], -1)
@@ -59,17 +63,17 @@ class ScoreTest(absltest.TestCase):
     self.start = start
 
   def test_the_reference_against_itself(self):
-    errors = pareto.score(self.reference, self.reference, self.start,
-                          self.scene)
+    errors = study.score(self.reference, self.reference, self.start,
+                         self.scene)
     self.assertEqual(errors, {m: 0.0 for m in tradeoff.METRICS})
 
   def test_a_run_behind_the_reference(self):
     # 0.06 m behind at the end: 10% of the runout distance.
     run = self.reference + [0.02, 0.0] * np.arange(1, 4)[:, None, None]
-    errors = pareto.score(run, self.reference, self.start, self.scene)
+    errors = study.score(run, self.reference, self.start, self.scene)
     self.assertAlmostEqual(errors["front_error"], 0.1, places=6)
-    past = lambda x: np.mean(x[..., 0][..., None] < np.array(pareto.LINES),
-                             -2)
+    past = lambda x: np.mean(x[..., 0][..., None] < np.array(study.LINES),
+                            -2)
     expected = np.max(np.mean(np.abs(past(run) - past(self.reference)), 0))
     self.assertAlmostEqual(errors["past_error"], expected)
     self.assertGreater(errors["past_error"], 0)
@@ -78,13 +82,13 @@ class ScoreTest(absltest.TestCase):
   def test_sand_in_the_ramp_counts_as_inside(self):
     run = self.reference.copy()
     run[:, :30, 1] = 0.0   # below the ramp (its lowest point is above 0)
-    errors = pareto.score(run, self.reference, self.start, self.scene)
+    errors = study.score(run, self.reference, self.start, self.scene)
     self.assertAlmostEqual(errors["inside"], 0.1)
 
   def test_a_broken_run_scores_nan(self):
     run = self.reference.copy()
     run[2, 5] = np.nan
-    errors = pareto.score(run, self.reference, self.start, self.scene)
+    errors = study.score(run, self.reference, self.start, self.scene)
     self.assertTrue(all(math.isnan(v) for v in errors.values()))
 
   def test_mass_past_by_hand(self):
@@ -100,17 +104,17 @@ class StudyTest(absltest.TestCase):
   @classmethod
   def setUpClass(cls):
     super().setUpClass()
-    scenes = pareto.study_scenes(2, num_frames=31)
-    cls.coarse = pareto.run_mpm(scenes, 0.02, repeats=2, timing_scene=1,
-                                batched=True)
-    cls.reference = pareto.run_mpm(scenes, 0.01, repeats=1, timing_scene=1,
-                                   batched=False)
+    scenes = study.study_scenes(2, num_frames=31)
+    cls.coarse = study.run_mpm(scenes, 0.02, repeats=2, timing_scene=1,
+                               batched=True)
+    cls.reference = study.run_mpm(scenes, 0.01, repeats=1, timing_scene=1,
+                                  batched=False)
     run = run_lib.load_run(PRETRAINED)
-    cls.gns = pareto.run_gns("small", PRETRAINED, run, cls.reference,
-                             repeats=1, timing_scene=1, batched=True)
-    cls.frames = pareto.compare_frames(31, [cls.gns.frames])
-    cls.rows = pareto.table_rows(cls.reference, [cls.coarse, cls.reference],
-                                 [cls.gns], cls.frames)
+    cls.gns = study.run_gns("small", PRETRAINED, run, cls.reference,
+                            repeats=1, timing_scene=1, batched=True)
+    cls.frames = study.compare_frames(31, [cls.gns.frames])
+    cls.rows = study.table_rows(cls.reference, [cls.coarse, cls.reference],
+                                [cls.gns], cls.frames)
 
   def test_points(self):
     p = self.coarse.point
@@ -146,7 +150,7 @@ class StudyTest(absltest.TestCase):
 
   def test_summary_report_and_choice(self):
     points = [self.coarse.point, self.reference.point, self.gns.point]
-    summary = pareto.summarise(points, self.rows)
+    summary = study.summarise(points, self.rows)
     reference = next(e for e in summary if e["name"] == "mpm_0.01")
     self.assertTrue(reference["pareto"])   # exact, so never dominated
     table = {"points": points, "rows": self.rows,
@@ -156,14 +160,73 @@ class StudyTest(absltest.TestCase):
              "environment": {"platform": "p", "cpu_count": 2,
                              "jax_version": "v", "jax_backend": "cpu",
                              "load_average_start": [0.5], "date": "d"}}
-    text = pareto.report(summary, table, self.coarse.scenes, (0.5, 1e-9),
-                         "cmd")
+    text = study.report({
+        "table": {**table, "command": "cmd"}, "configurations": summary,
+        "tolerances": [0.5, 1e-9],
+        "picks": study.picks(table, self.coarse.scenes, (0.5, 1e-9))})
+    self.assertIn("Command: `cmd`", text)
     self.assertIn("| MPM, spacing 20 mm (dx 40 mm) |", text)
     self.assertIn("GNS small", text)
     # A tolerance no configuration but the reference meets.
-    self.assertIn("| all | ", text)
+    self.assertIn("| all | mpm_0.01 (", text)
     choice = tradeoff.cheapest(table, 1e-9)
     self.assertEqual(choice.point["name"], "mpm_0.01")
+
+
+class SettingsTest(absltest.TestCase):
+
+  def test_bad_settings_name_their_flags(self):
+    study.Settings()
+    bad = [({"spacings": (0.02, 0.0)}, "--spacings=0.0: allowed: > 0"),
+           ({"reference_spacing": -1.0}, "--reference_spacing=-1.0: "
+            "allowed: > 0"),
+           ({"spacings": (0.02, 0.01), "reference_spacing": 0.015},
+            "--reference_spacing=0.015 is coarser than --spacings' 0.01"),
+           ({"gns": ("small",)}, "--gns item 'small'; allowed: NAME=WORKDIR"),
+           ({"gns": ("a=x", "a=y")}, r"--gns: name\(s\) \['a'\] given "
+            "twice"),
+           ({"num_frames": 29}, "--num_frames=29: allowed: >= 30")]
+    for changes, message in bad:
+      with self.assertRaisesRegex(mpm.InputError, "^" + message,
+                                  msg=str(changes)):
+        study.Settings(**changes)
+    self.assertEqual(study.Settings(gns=()).gns_workdirs(), [])
+
+  def test_a_run_trained_elsewhere_is_refused_before_anything_is_written(
+      self):
+    with tempfile.TemporaryDirectory() as d:
+      out = os.path.join(d, "out")
+      with self.assertRaisesRegex(mpm.InputError, "^--gns small: trained at "
+                                  "spacing 0.01 m, which is not in "
+                                  "--spacings"):
+        study.run(study.Settings(spacings=(0.02,), reference_spacing=0.02,
+                                 gns=(f"small={PRETRAINED}",)), out)
+      self.assertFalse(os.path.exists(out))
+
+
+class RunTest(absltest.TestCase):
+  """``run`` on one scene, the MPM alone at 40 mm against 20 mm."""
+
+  def test_writes_the_table_the_library_reads(self):
+    s = study.Settings(spacings=(0.02, 0.04), reference_spacing=0.02,
+                       scenes=1, num_frames=30, repeats=1, gns=())
+    with tempfile.TemporaryDirectory() as d:
+      summary = study.run(s, d)
+      self.assertCountEqual(os.listdir(d), [
+          "tradeoff.json", "tradeoff.md", "points.csv", "rows.csv",
+          "tradeoff.png", "tradeoff_batched.png"])
+      table = tradeoff.load(os.path.join(d, "tradeoff.json"))
+      with open(os.path.join(d, "tradeoff.md")) as f:
+        self.assertEqual(f.read(), study.report(summary))
+    self.assertEqual(table["settings"], s.to_dict())
+    # Coarse to fine, whatever the order asked.
+    self.assertEqual([p["name"] for p in table["points"]],
+                     ["mpm_0.04", "mpm_0.02"])
+    self.assertEqual(tradeoff.cheapest(table, 1e-9).point["name"],
+                     "mpm_0.02")
+    self.assertEqual([p["scenes"] for p in summary["picks"]],
+                     ["all", "none"])
+    self.assertIn("Settings: `{", study.report(summary))
 
 
 if __name__ == "__main__":
