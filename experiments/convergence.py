@@ -28,7 +28,6 @@ import tqdm
 
 import mpm
 from experiments import column_collapse
-from experiments import evaluation
 from experiments import figures
 from experiments import pareto
 from experiments import runtime
@@ -88,10 +87,10 @@ def main(argv):
   deposits = {}
 
   def save():
-    evaluation.write_csv(os.path.join(_OUT.value, "convergence.csv"),
+    mpm_io.write_csv(os.path.join(_OUT.value, "convergence.csv"),
                          column_rows)
     if paper_rows:
-      evaluation.write_csv(os.path.join(_OUT.value, "convergence_paper.csv"),
+      mpm_io.write_csv(os.path.join(_OUT.value, "convergence_paper.csv"),
                            paper_rows)
 
   for aspect in aspects:

@@ -93,7 +93,6 @@ def main(argv):
   xs, hs = _check_inputs()
   runtime.enable_compilation_cache()
   # pylint: disable=g-import-not-at-top
-  from experiments import evaluation
   from gnsjax.design import gradient_check
   from gnsjax.design import objectives
   objective = objectives.make(_OBJECTIVE.value, x_protect=_X_PROTECT.value,
@@ -103,7 +102,7 @@ def main(argv):
                               sigma=_SIGMA.value, num_samples=_SAMPLES.value,
                               hs=hs)
   os.makedirs(_OUT.value, exist_ok=True)
-  evaluation.write_csv(os.path.join(_OUT.value, "rows.csv"), rows)
+  mpm_io.write_csv(os.path.join(_OUT.value, "rows.csv"), rows)
   mpm_io.write_json(os.path.join(_OUT.value, "summary.json"), {
       "scene": scene.to_dict(), "objective": _OBJECTIVE.value,
       "x_protect": _X_PROTECT.value, "target_x": _TARGET_X.value,

@@ -201,7 +201,7 @@ def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
      constant-velocity baseline.
   4. Writes the metrics and an MPM | GNS animation and frame grid.
   """
-  from experiments import evaluation  # pylint: disable=g-import-not-at-top
+  from experiments.studies import evaluation  # pylint: disable=g-import-not-at-top
   from gnsjax import rollout as rollout_lib  # pylint: disable=g-import-not-at-top
   from gnsjax import train  # pylint: disable=g-import-not-at-top
   from mpm import dataset  # pylint: disable=g-import-not-at-top
@@ -444,7 +444,7 @@ def ablation(data_dir: str, out_dir: str, *, minutes: float = 8.0,
   Writes ``ablation.json`` and ``ablation.md`` in ``out_dir``; each
   variant's run lives in ``out_dir/<name>`` (a rerun resumes or reuses it).
   """
-  from experiments import evaluation  # pylint: disable=g-import-not-at-top
+  from experiments.studies import evaluation  # pylint: disable=g-import-not-at-top
   from experiments.configs import small  # pylint: disable=g-import-not-at-top
   from gnsjax import train  # pylint: disable=g-import-not-at-top
   import jax  # pylint: disable=g-import-not-at-top

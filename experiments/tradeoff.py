@@ -19,12 +19,12 @@ from absl import logging
 import tqdm
 
 import mpm
-from experiments import evaluation
 from experiments import figures
 from experiments import pareto
 from experiments import runtime
 from experiments import timing
 from gnsjax import run as run_lib
+from mpm import io as mpm_io
 
 _OUT = flags.DEFINE_string("out", None, "Output directory.")
 _SPACINGS = flags.DEFINE_list(
@@ -135,9 +135,9 @@ def main(argv):
   text = pareto.report(summary, table, scenes, _TOLERANCES, command)
   timing.write_results(out, "tradeoff", False, table, text)
   keys = list(dict.fromkeys(k for e in summary for k in e))
-  evaluation.write_csv(os.path.join(out, "points.csv"),
+  mpm_io.write_csv(os.path.join(out, "points.csv"),
                        [{k: e.get(k) for k in keys} for e in summary])
-  evaluation.write_csv(os.path.join(out, "rows.csv"), rows)
+  mpm_io.write_csv(os.path.join(out, "rows.csv"), rows)
   figures.pareto(summary, os.path.join(out, "tradeoff.png"))
   figures.pareto(summary, os.path.join(out, "tradeoff_batched.png"),
                  batched=True)
