@@ -18,8 +18,8 @@ import os
 
 from absl import flags
 
+from experiments import file_jobs
 from experiments import runtime
-from experiments import tasks
 from mpm import io as mpm_io
 from mpm import sampler
 
@@ -97,7 +97,7 @@ def main(argv):
   from gnsjax.design import objectives
   objective = objectives.make(_OBJECTIVE.value, x_protect=_X_PROTECT.value,
                               target_x=_TARGET_X.value)
-  scene = tasks.design_scene(num_frames=_FRAMES.value)
+  scene = file_jobs.design_scene(num_frames=_FRAMES.value)
   rows = gradient_check.check(_driver(scene), objective, xs,
                               sigma=_SIGMA.value, num_samples=_SAMPLES.value,
                               hs=hs)

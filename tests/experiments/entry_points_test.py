@@ -41,7 +41,7 @@ class LayoutTest(absltest.TestCase):
   def test_tests_import_no_entry_point_that_defines_flags(self):
     # absl flags are process-global: two imported entry points that both
     # define --out fail to load in one pytest worker. Tests import the
-    # library modules beside them (evaluation, extremes, ...), the benchmark
+    # library modules beside them (experiments.studies, ...), the benchmark
     # driver being the one entry point imported (its flags are its API).
     allowed = {"runtime", "benchmarks/__main__"}
     defines = {os.path.relpath(p, os.path.join(ROOT, "experiments"))[:-3]

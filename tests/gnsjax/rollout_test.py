@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 
 import mpm
-from experiments import tasks
+from experiments.studies import settings
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import metrics
 from gnsjax import models
 from gnsjax import rollout
+from gnsjax import run as run_lib
 from gnsjax import simulator
-from gnsjax import train
 from mpm import geometry
 from tests.gnsjax import fixtures
 
@@ -78,7 +78,7 @@ class RolloutTest(absltest.TestCase):
     super().setUpClass()
     cls.data = fixtures.tiny_dataset()
     cls.config = fixtures.tiny_config()
-    cls.problem = train.load_problem(cls.data, cls.config)
+    cls.problem = run_lib.load_problem(cls.data, cls.config)
     cls.trajectory = next(data.trajectories(data.split_path(cls.data, "test")))
 
   def _oracle(self, k, c, project):
@@ -227,7 +227,7 @@ class SolidConstraintTest(absltest.TestCase):
   @classmethod
   def setUpClass(cls):
     super().setUpClass()
-    cls.problem = train.load_problem(fixtures.tiny_dataset(),
+    cls.problem = run_lib.load_problem(fixtures.tiny_dataset(),
                                      fixtures.tiny_config())
     # A grid fine enough for the semicircle's curvature: bilinear
     # interpolation is within h^2 / (8 r) = 1.6e-5 m of its distance.
@@ -314,7 +314,7 @@ class RolloutBatchTest(absltest.TestCase):
   def setUpClass(cls):
     super().setUpClass()
     cls.data = fixtures.tiny_dataset()
-    cls.problem = train.load_problem(cls.data, fixtures.tiny_config())
+    cls.problem = run_lib.load_problem(cls.data, fixtures.tiny_config())
     t0, t1 = list(data.trajectories(data.split_path(cls.data, "test")))[:2]
     spacing = cls.problem.sdf_spacing
     cls.scenes = [rollout.trajectory_nodes(t0, C, sdf_spacing=spacing),
@@ -436,7 +436,7 @@ class PretrainedStabilityTest(absltest.TestCase):
   def setUpClass(cls):
     super().setUpClass()
     # From the checkpoint alone (its stored config and problem).
-    run = train.load_run(tasks.PRETRAINED)
+    run = run_lib.load_run(settings.PRETRAINED)
     cls.problem, cls.params = run.problem, run.params
     cls.predictor = simulator.ModelPredictor(run.model)
     cls.scenes = [resting_scene(200, 0.9, 0.04, cls.problem.sdf_spacing),

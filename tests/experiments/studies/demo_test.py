@@ -1,5 +1,5 @@
-"""The shipped small model: it loads as `make demo` loads it, and is what its
-provenance says it is."""
+"""Tests for `experiments.studies.demo`: the shipped small model loads as
+`make demo` loads it, and is what its provenance says it is."""
 
 import json
 import os
@@ -11,21 +11,21 @@ import jax
 import numpy as np
 
 import mpm
-
-from experiments import tasks
-from gnsjax import train
+from experiments.studies import demo
+from experiments.studies import settings
+from gnsjax import run as run_lib
 
 
 class PretrainedTest(absltest.TestCase):
 
   def test_loads_at_the_step_its_provenance_names(self):
-    with open(os.path.join(tasks.PRETRAINED, "provenance.json")) as f:
+    with open(os.path.join(settings.PRETRAINED, "provenance.json")) as f:
       provenance = json.load(f)
-    steps = os.listdir(os.path.join(tasks.PRETRAINED, "checkpoints"))
+    steps = os.listdir(os.path.join(settings.PRETRAINED, "checkpoints"))
     # One step directory, as a checkpoint manager writes it (the demo copies
     # it into its own work directory and resumes from it).
     self.assertEqual(steps, [str(provenance["step"])])
-    run = train.load_run(tasks.PRETRAINED)
+    run = run_lib.load_run(settings.PRETRAINED)
     self.assertEqual(run.step, provenance["step"])
     self.assertEqual(run.config.model.to_dict(), provenance["config"]["model"])
     leaves = jax.tree.leaves(run.params)
@@ -40,17 +40,18 @@ class PretrainedTest(absltest.TestCase):
     self.addCleanup(tmp_dir.cleanup)
     tmp = tmp_dir.name
     source = os.path.join(tmp, "shipped")
-    shutil.copytree(tasks.PRETRAINED, source)
+    shutil.copytree(settings.PRETRAINED, source)
     workdir = os.path.join(tmp, "run")
-    step = tasks.ship_checkpoint(source, workdir)
-    self.assertEqual(tasks.ship_checkpoint(source, workdir), step)  # resumes
-    self.assertEqual(train.load_run(workdir).step, step)
+    step = demo.ship_checkpoint(source, workdir)
+    self.assertEqual(demo.ship_checkpoint(source, workdir), step)  # resumes
+    self.assertEqual(run_lib.load_run(workdir).step, step)
     with open(os.path.join(source, "provenance.json"), "a") as f:
       f.write("\n")  # another shipped model
     with self.assertRaisesRegex(mpm.InputError, "another shipped model"):
-      tasks.ship_checkpoint(source, workdir)
+      demo.ship_checkpoint(source, workdir)
     fresh = os.path.join(tmp, "fresh")
-    self.assertEqual(tasks.ship_checkpoint(source, fresh), step)
+    self.assertEqual(demo.ship_checkpoint(source, fresh), step)
+
 
 
 if __name__ == "__main__":

@@ -1,12 +1,14 @@
-"""The jobs behind the entry points, as plain functions (no flags here).
+"""The file jobs behind the entry points, as plain functions (no flags):
+simulate a scene to a trajectory file (``experiments.simulate``), render a
+trajectory file (``experiments.render``), roll a trained run out into
+trajectory files (``experiments.rollout``).
 
-Each ``experiments/<name>.py`` parses flags and calls one function of this
-module, so that jobs compose (the demo runs several) and tests call them
-directly.
+The demo study composes them. Plotting (matplotlib) and the learned
+simulator (gnsjax) are imported only by the jobs that need them, so that
+``python -m experiments.simulate`` loads neither.
 """
 
 import dataclasses
-import hashlib
 import os
 from typing import Sequence
 
@@ -14,8 +16,7 @@ import numpy as np
 import tqdm
 
 import mpm
-from experiments import figures
-from gnsjax import data
+from experiments.studies import settings as settings_lib
 from mpm import io as mpm_io
 
 
@@ -48,6 +49,7 @@ def render_file(traj_path: str, out_dir: str, index: int = 0,
   the same trajectory of ``compare_path`` if given (the paper's Fig. 2: MPM
   left, GNS right). ``frames`` of the grid default to the paper's (1, 80,
   120, 180) that the trajectory has."""
+  from experiments import figures  # pylint: disable=g-import-not-at-top
   t = _nth(traj_path, index)
   n = len(t.positions)
   panels = [(f"MPM: {t.scene.name}", t.positions)]
@@ -83,9 +85,12 @@ def rollout_to_files(workdir: str, data_dir: str, out_dir: str,
   Both files hold the frames the model predicts (every ``frame_stride``-th
   stored frame after the inputs), preceded by its input frames.
   """
-  from gnsjax import rollout as rollout_lib  # pylint: disable=g-import-not-at-top
-  from gnsjax import train  # pylint: disable=g-import-not-at-top
-  run = train.load_run(workdir)
+  # pylint: disable=g-import-not-at-top
+  from gnsjax import data
+  from gnsjax import rollout as rollout_lib
+  from gnsjax import run as run_lib
+  # pylint: enable=g-import-not-at-top
+  run = run_lib.load_run(workdir)
   path = data.split_path(data_dir, split)
   os.makedirs(out_dir, exist_ok=True)
   c, k = run.problem.input_frames, run.problem.frame_stride
@@ -98,9 +103,9 @@ def rollout_to_files(workdir: str, data_dir: str, out_dir: str,
     frames = rollout_lib.predicted_frame_indices(len(t.positions), c, k)
     out = rollout_lib.rollout_trajectory(run.model, run.params, t,
                                          run.problem, project=project)
-    predicted.append(_with_frames(t, np.concatenate(
+    predicted.append(with_frames(t, np.concatenate(
         [t.positions[inputs], out.positions]), k))
-    truth.append(_with_frames(t, t.positions[np.concatenate([inputs,
+    truth.append(with_frames(t, t.positions[np.concatenate([inputs,
                                                              frames])], k))
   paths = {"predicted": os.path.join(out_dir, "predicted.h5"),
            "truth": os.path.join(out_dir, "truth.h5")}
@@ -109,7 +114,8 @@ def rollout_to_files(workdir: str, data_dir: str, out_dir: str,
   return paths
 
 
-def _with_frames(t: mpm_io.Trajectory, positions: np.ndarray, stride: int):
+def with_frames(t: mpm_io.Trajectory, positions: np.ndarray,
+                stride: int) -> mpm_io.Trajectory:
   """The trajectory with every ``stride``-th frame from 0 as ``positions``:
   its scene's frame count and frame_dt follow, so the file stays
   self-consistent."""
@@ -117,159 +123,6 @@ def _with_frames(t: mpm_io.Trajectory, positions: np.ndarray, stride: int):
                               frame_dt=t.scene.frame_dt * stride)
   return dataclasses.replace(t, positions=positions.astype(np.float32),
                              scene=scene)
-
-
-# A small pretrained model shipped with the project (experiments/configs/
-# small.py); see its provenance.json.
-PRETRAINED = os.path.join(os.path.dirname(__file__), "pretrained", "small")
-
-
-def demo_config(num_train: int, num_test: int, steps: int,
-                num_frames: int = 600):
-  """configs/small.py with a demo-sized dataset and a short training."""
-  from experiments.configs import small  # pylint: disable=g-import-not-at-top
-  config = small.get_config()
-  config.dataset.num_frames = num_frames
-  config.dataset.num_train = num_train
-  config.dataset.num_test = num_test
-  config.train.num_steps = steps
-  # A constant small rate, whatever step the shipped model stopped at: a
-  # short fine-tuning on a few scenes should adjust it, not retrain it.
-  config.train.lr_init = config.train.lr_min = 1.5e-5
-  config.checkpoint.every_steps = 100
-  config.checkpoint.named_steps = ()
-  config.eval.every_steps = 0
-  return config
-
-
-# In a demo's work directory: which shipped checkpoint it was started from.
-SHIPPED_RECORD = "shipped_from.json"
-
-
-def ship_checkpoint(source: str, workdir: str) -> int:
-  """Copies a shipped checkpoint into ``workdir``; returns its step.
-
-  A work directory started from another shipped checkpoint (an older model,
-  before an update) would resume its own run and silently show the old
-  model, so it is refused.
-
-  Raises:
-    mpm.InputError: when ``workdir`` holds checkpoints not started from this
-      one (it names what to delete).
-  """
-  import shutil  # pylint: disable=g-import-not-at-top
-  steps = sorted(int(d) for d in os.listdir(os.path.join(source, "checkpoints"))
-                 if d.isdigit())
-  with open(os.path.join(source, "provenance.json"), "rb") as f:
-    shipped = {"step": steps[-1],
-               "provenance_sha256": hashlib.sha256(f.read()).hexdigest()}
-  record = os.path.join(workdir, SHIPPED_RECORD)
-  held = os.path.join(workdir, "checkpoints")
-  if os.path.isdir(held) and os.listdir(held):
-    previous = mpm_io.read_json(record) if os.path.exists(record) else None
-    if previous != shipped:
-      raise mpm.InputError(
-          f"{workdir} holds a run started from another shipped model (or "
-          f"from none); delete {workdir} (or choose another --out) to start "
-          "from the current one")
-  # The record first: a kill between the two leaves a record and no
-  # checkpoint, which the next run accepts.
-  os.makedirs(workdir, exist_ok=True)
-  mpm_io.write_json(record, shipped)
-  target = os.path.join(held, str(steps[-1]))
-  if not os.path.exists(target):
-    # Copied whole or not at all: a half copy would pass for a checkpoint.
-    partial = target + ".partial"
-    shutil.rmtree(partial, ignore_errors=True)
-    shutil.copytree(os.path.join(source, "checkpoints", str(steps[-1])),
-                    partial)
-    os.replace(partial, target)
-  return steps[-1]
-
-
-def demo(out_dir: str, *, num_train: int = 4, num_test: int = 6,
-         num_frames: int = 600, finetune_steps: int = 200,
-         pretrained: str | None = PRETRAINED,
-         workers: int = 2) -> dict[str, str]:
-  """The end-to-end demo: data, model, rollout of an unseen scene, pictures.
-
-  1. Generates a small dataset (the small config's physics, few scenes).
-  2. Fine-tunes the shipped pretrained small model on it for
-     ``finetune_steps`` steps (or, without one, trains from scratch).
-  3. Rolls the model out on the test scene with the triangle obstacle, a
-     shape never seen in training, and measures it against the MPM and a
-     constant-velocity baseline.
-  4. Writes the metrics and an MPM | GNS animation and frame grid.
-  """
-  from experiments.studies import evaluation  # pylint: disable=g-import-not-at-top
-  from gnsjax import rollout as rollout_lib  # pylint: disable=g-import-not-at-top
-  from gnsjax import train  # pylint: disable=g-import-not-at-top
-  from mpm import dataset  # pylint: disable=g-import-not-at-top
-
-  os.makedirs(out_dir, exist_ok=True)
-  data_dir = os.path.join(out_dir, "data")
-  workdir = os.path.join(out_dir, "run")
-  os.makedirs(workdir, exist_ok=True)
-  start = 0
-  if pretrained and os.path.isdir(os.path.join(pretrained, "checkpoints")):
-    start = ship_checkpoint(pretrained, workdir)
-  config = demo_config(num_train, num_test, start + finetune_steps,
-                       num_frames)
-  spec = dataset.DatasetSpec(**config.dataset.to_dict())
-  with tqdm.tqdm(total=spec.num_train + spec.num_test, unit="traj",
-                 desc="dataset") as bar:
-    dataset.generate(spec, data_dir, workers=workers,
-                     progress=lambda done, *_: bar.update(done - bar.n))
-  train.train_and_evaluate(config, data_dir, workdir)
-
-  run = train.load_run(workdir)
-  c, k = run.problem.input_frames, run.problem.frame_stride
-  t = next(t for t in data.trajectories(data.split_path(data_dir, "test"))
-           if dataset.group_of(t.scene.name) == "triangle")
-  frames = rollout_lib.predicted_frame_indices(len(t.positions), c, k)
-  with tqdm.tqdm(total=1, unit="rollout", desc="GNS rollout") as bar:
-    out = rollout_lib.rollout_trajectory(run.model, run.params, t,
-                                         run.problem)
-    bar.update(1)
-  scores = evaluation.score(t, out, frames, run.problem)
-  row = evaluation.per_trajectory_row({
-      "index": 0, "name": t.scene.name, **evaluation.describe(t.scene),
-      **scores})
-  result = {
-      "scene": t.scene.name, "model_step": run.step, "fine_tuned_from": start,
-      "particles": int(t.positions.shape[1]), "learned_steps": len(frames),
-      "frame_stride": k,
-      "gns_mean_mse_m2": row["mean_mse"],
-      "gns_final_mse_m2": row["final_mse"],
-      "constant_velocity_mean_mse_m2": row["mean_mse_constant_velocity"],
-      "gns_final_runout_error_m": row["final_runout_error"],
-      "gns_front_error_relative": row["front_error_relative"],
-      "gns_deposit_error_m": row["deposit_error"],
-      "gns_max_inside_solids": row["max_inside_solids"],
-      "gns_max_outside_domain": row["max_outside_domain"],
-      "gns_final_speed_m_s": row["final_speed"],
-      "mpm_final_speed_m_s": row["mpm_final_speed"],
-      "mpm_max_inside_solids": row["mpm_max_inside_solids"],
-      "gns_mean_pushed_fraction": row["mean_pushed_fraction"],
-  }
-  paths = {"data": data_dir, "run": workdir,
-           "metrics": os.path.join(out_dir, "metrics.json"),
-           "truth": os.path.join(out_dir, "truth.h5"),
-           "predicted": os.path.join(out_dir, "predicted.h5")}
-  mpm_io.write_json(paths["metrics"], result)
-  inputs = rollout_lib.input_frame_indices(c, k)
-  mpm_io.write_trajectories(paths["truth"], [_with_frames(
-      t, t.positions[np.concatenate([inputs, frames])], k)])
-  mpm_io.write_trajectories(paths["predicted"], [_with_frames(
-      t, np.concatenate([t.positions[inputs], out.positions]), k)])
-  shown = np.linspace(1, len(inputs) + len(frames) - 1, 5).astype(int)
-  paths["animation"], paths["frames"] = render_file(
-      paths["truth"], out_dir, frames=tuple(shown),
-      compare_path=paths["predicted"])
-  for k, value in result.items():
-    print(f"{k:>32}: {value:.4g}" if isinstance(value, float) else
-          f"{k:>32}: {value}")
-  return paths
 
 
 def design_scene(shape: str = "semicircle", size: Sequence[float] = (0.04,),
@@ -327,13 +180,15 @@ def inverse_design(out_dir: str, *, scene_path: str | None = None,
                    simulator: str = "gns", objective: str = "passed_fraction",
                    x_protect: float = 0.4, target_x: float = 0.6,
                    temperature: float | None = None,
-                   workdir: str | None = PRETRAINED, steps: int = 8,
+                   workdir: str | None = settings_lib.PRETRAINED,
+                   steps: int = 8,
                    learning_rate: float = 0.05, sweep_points: int = 9,
                    optimise_size: bool = False, method: str = "adam",
                    sigma: float = 0.05, num_samples: int = 16,
                    estimator: str = "score") -> dict:
   """The inverse-design study (``gnsjax.design.study.study``) of a scene,
   with its plot ``objective_vs_x.png``; returns the summary."""
+  from experiments import figures  # pylint: disable=g-import-not-at-top
   from gnsjax.design import objectives  # pylint: disable=g-import-not-at-top
   from gnsjax.design import study  # pylint: disable=g-import-not-at-top
   if scene_path is not None:
