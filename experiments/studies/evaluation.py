@@ -408,8 +408,8 @@ def report(summary: dict[str, Any]) -> str:
       lines.append(f"| {fig} | {label} | {np.mean(curve):.3e} | "
                    f"{curve[-1]:.3e} |")
   lines += ["", "## Table 2: seconds per simulation, this hardware, one run",
-            "", "| group | particles | obstacles | frames | GNS steps | MPM (s) "
-            "| GNS (s) | MPM/GNS | GNS MSE (m^2) |",
+            "", "| group | particles | obstacles | frames | GNS steps | "
+            "MPM (s) | GNS (s) | MPM/GNS | GNS MSE (m^2) |",
             "|---|---|---|---|---|---|---|---|---|"]
   for r in summary["table2"]:
     lines.append(f"| {r['group']} | {r['particles']} | {r['obstacles']} | "
