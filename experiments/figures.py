@@ -237,7 +237,7 @@ def flow_checks(results: Sequence[dict], frame_dt: float, path: str):
   """Per step, mean over trajectories of each test group: sand inside solids
   (with and without the constraint), outside the domain, the front error
   and the fraction the constraint pushed. ``results`` from
-  ``experiments.evaluation.rollout_split``."""
+  ``experiments.studies.evaluation.rollout_split``."""
   groups: dict[str, list] = {}
   for r in results:
     groups.setdefault(r["group"], []).append(r)

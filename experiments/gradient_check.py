@@ -18,8 +18,8 @@ import os
 
 from absl import flags
 
+from experiments import file_jobs
 from experiments import runtime
-from experiments import tasks
 from mpm import io as mpm_io
 from mpm import sampler
 
@@ -93,17 +93,16 @@ def main(argv):
   xs, hs = _check_inputs()
   runtime.enable_compilation_cache()
   # pylint: disable=g-import-not-at-top
-  from experiments import evaluation
   from gnsjax.design import gradient_check
   from gnsjax.design import objectives
   objective = objectives.make(_OBJECTIVE.value, x_protect=_X_PROTECT.value,
                               target_x=_TARGET_X.value)
-  scene = tasks.design_scene(num_frames=_FRAMES.value)
+  scene = file_jobs.design_scene(num_frames=_FRAMES.value)
   rows = gradient_check.check(_driver(scene), objective, xs,
                               sigma=_SIGMA.value, num_samples=_SAMPLES.value,
                               hs=hs)
   os.makedirs(_OUT.value, exist_ok=True)
-  evaluation.write_csv(os.path.join(_OUT.value, "rows.csv"), rows)
+  mpm_io.write_csv(os.path.join(_OUT.value, "rows.csv"), rows)
   mpm_io.write_json(os.path.join(_OUT.value, "summary.json"), {
       "scene": scene.to_dict(), "objective": _OBJECTIVE.value,
       "x_protect": _X_PROTECT.value, "target_x": _TARGET_X.value,

@@ -29,7 +29,8 @@ from absl import flags
 
 import mpm
 from experiments import runtime
-from experiments import tasks
+from experiments.studies import settings
+from experiments import file_jobs
 from mpm import sampler
 from mpm import scene as scene_lib
 
@@ -60,7 +61,7 @@ _X0 = flags.DEFINE_float("x0", 1.0, "Starting obstacle x (m), in [%g, %g]."
                          % _X_RANGE)
 _FRAMES = flags.DEFINE_integer("num_frames", 600, "Frames per rollout.",
                                lower_bound=2)
-_WORKDIR = flags.DEFINE_string("workdir", tasks.PRETRAINED,
+_WORKDIR = flags.DEFINE_string("workdir", settings.PRETRAINED,
                                "Trained GNS (default: the shipped model); "
                                "empty: MPM only.")
 _STEPS = flags.DEFINE_integer("steps", 8, "Gradient evaluations.",
@@ -287,7 +288,7 @@ def main(argv):
   _check_inputs()
   runtime.enable_compilation_cache()
   if _PROBLEM.value == "calibrate":
-    summary = tasks.calibration_study(
+    summary = file_jobs.calibration_study(
         _OUT.value, truth=[float(v) for v in _TRUTH.value],
         start=[float(v) for v in _START.value], methods=_METHOD.value,
         budget_s=_BUDGET_S.value, budget_evals=_BUDGET_EVALS.value,
@@ -296,7 +297,7 @@ def main(argv):
     print(f"report: {_OUT.value}/report.md")
     return
   if _comparing():
-    summary = tasks.design_comparison(
+    summary = file_jobs.design_comparison(
         _OUT.value, problem=_PROBLEM.value, methods=_METHOD.value,
         budget_s=_BUDGET_S.value, budget_evals=_BUDGET_EVALS.value,
         xs=[float(v) for v in _XS.value],
@@ -311,7 +312,7 @@ def main(argv):
         sweep_points=_SWEEP.value, seed=_SEED.value)
     print(f"winner: {summary['winner']}; report: {_OUT.value}/report.md")
     return
-  summary = tasks.inverse_design(
+  summary = file_jobs.inverse_design(
       _OUT.value, scene_path=_SCENE.value, shape=_SHAPE.value,
       size=[float(s) for s in _SIZE.value], x0=_X0.value,
       num_frames=_FRAMES.value, simulator=_SIMULATOR.value,

@@ -8,7 +8,7 @@
 from absl import flags
 
 from experiments import runtime
-from experiments import tasks
+from experiments import file_jobs
 
 _TRAJ = flags.DEFINE_string("traj", None, "Trajectory file (.h5).")
 _OUT = flags.DEFINE_string("out", None, "Output directory.")
@@ -42,9 +42,9 @@ def main(argv):
   runtime.existing_file("compare", _COMPARE.value)
   runtime.writable("out", _OUT.value)
   frames = None if _FRAMES.value is None else [int(f) for f in _FRAMES.value]
-  for path in tasks.render_file(_TRAJ.value, _OUT.value, _INDEX.value,
-                                frames, _FORMAT.value,
-                                compare_path=_COMPARE.value):
+  for path in file_jobs.render_file(_TRAJ.value, _OUT.value, _INDEX.value,
+                                    frames, _FORMAT.value,
+                                    compare_path=_COMPARE.value):
     print(path)
 
 

@@ -13,7 +13,7 @@ constraint off (to see what the model alone does).
 from absl import flags
 
 from experiments import runtime
-from experiments import tasks
+from experiments import file_jobs
 
 _WORKDIR = flags.DEFINE_string("workdir", None, "Training run directory.")
 _DATA = flags.DEFINE_string("data", None, "Dataset directory.")
@@ -31,9 +31,9 @@ def main(argv):
   runtime.existing_dir("data", _DATA.value, holding=f"{_SPLIT.value}.h5")
   runtime.writable("out", _OUT.value)
   runtime.enable_compilation_cache()
-  paths = tasks.rollout_to_files(_WORKDIR.value, _DATA.value, _OUT.value,
-                                 _SPLIT.value, _MAX.value,
-                                 project=_PROJECT.value)
+  paths = file_jobs.rollout_to_files(_WORKDIR.value, _DATA.value,
+                                     _OUT.value, _SPLIT.value, _MAX.value,
+                                     project=_PROJECT.value)
   for name, path in paths.items():
     print(f"{name}: {path}")
 

@@ -11,7 +11,7 @@ import jax
 
 import mpm
 from experiments import runtime
-from experiments import tasks
+from experiments import file_jobs
 
 _SCENE = flags.DEFINE_string("scene", None, "Scene JSON file.")
 _SEED = flags.DEFINE_integer(
@@ -36,7 +36,7 @@ def main(argv):
   runtime.writable("out", _OUT.value, directory=False)
   runtime.enable_compilation_cache()
   logging.info("devices: %s", jax.devices())
-  result = tasks.simulate_to_file(scene, _OUT.value, seed, _CHUNK.value)
+  result = file_jobs.simulate_to_file(scene, _OUT.value, seed, _CHUNK.value)
   print(f"{_OUT.value}: {result.positions.shape[0]} frames, "
         f"{result.positions.shape[1]} particles, {result.n_substeps} "
         f"substeps/frame, {result.wall_time_s:.2f} s simulating "

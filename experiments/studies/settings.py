@@ -17,12 +17,19 @@ entry points derive their flags from these fields
 
 import dataclasses
 import math
+import os
 import typing
 from typing import Any
 
 import mpm
 
 InputError = mpm.InputError
+
+# The small pretrained model shipped with the project (experiments/configs/
+# small.py; see its provenance.json): the default trained run of the studies
+# that use one.
+PRETRAINED = os.path.join(os.path.dirname(os.path.dirname(__file__)),
+                          "pretrained", "small")
 
 _SCALARS = (bool, int, float, str)
 

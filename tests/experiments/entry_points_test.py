@@ -41,7 +41,7 @@ class LayoutTest(absltest.TestCase):
   def test_tests_import_no_entry_point_that_defines_flags(self):
     # absl flags are process-global: two imported entry points that both
     # define --out fail to load in one pytest worker. Tests import the
-    # library modules beside them (evaluation, extremes, ...), the benchmark
+    # library modules beside them (experiments.studies, ...), the benchmark
     # driver being the one entry point imported (its flags are its API).
     allowed = {"runtime", "benchmarks/__main__"}
     defines = {os.path.relpath(p, os.path.join(ROOT, "experiments"))[:-3]
@@ -144,32 +144,6 @@ class EntryPointsTest(absltest.TestCase):
     self.assertIn("OK", run("experiments.generate_dataset",
                             "--config=experiments/configs/test.py",
                             f"--out={out}", "--verify"))
-
-  def test_demo(self):
-    # The small config learns steps of 3 frames from 6 inputs: windows of 19
-    # frames; 22 leave two learned steps after frame 15 (18 and 21).
-    out = run("experiments.demo", f"--out={self.dir}/demo", "--num_frames=22",
-              "--num_train=2", "--finetune_steps=2", "--nopretrained")
-    for name in ("metrics.json", "animation.gif", "frames.png", "truth.h5",
-                 "predicted.h5"):
-      self.assertIn(name, out)
-      self.assertTrue(os.path.exists(os.path.join(self.dir, "demo", name)))
-    with open(os.path.join(self.dir, "demo", "metrics.json")) as f:
-      metrics = json.load(f)
-    self.assertIn("triangle", metrics["scene"])
-    self.assertGreater(metrics["constant_velocity_mean_mse_m2"], 0)
-    self.assertEqual(metrics["frame_stride"], 3)
-    self.assertEqual(metrics["learned_steps"], 2)
-    # The files hold the 6 input frames at the stride, then the predictions.
-    (truth,) = mpm_io.read_trajectories(os.path.join(self.dir, "demo",
-                                                     "truth.h5"))
-    (predicted,) = mpm_io.read_trajectories(os.path.join(self.dir, "demo",
-                                                         "predicted.h5"))
-    self.assertEqual(truth.positions.shape[0], 8)
-    self.assertEqual(predicted.positions.shape, truth.positions.shape)
-    np.testing.assert_array_equal(predicted.positions[:6],
-                                  truth.positions[:6])
-    self.assertAlmostEqual(truth.scene.frame_dt, 3 * 0.0025)
 
 
 if __name__ == "__main__":

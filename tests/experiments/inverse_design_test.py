@@ -6,7 +6,7 @@ import tempfile
 
 from absl.testing import absltest
 
-from experiments import tasks
+from experiments import file_jobs
 from gnsjax import train
 from tests.gnsjax import fixtures
 
@@ -33,7 +33,7 @@ class InverseDesignTest(absltest.TestCase):
   def test_gns_study_writes_history_sweep_plot_and_verdict(self):
     out = tempfile.mkdtemp()
     # 16 frames: inputs 0, 2, ..., 10, learned steps to 12 and 14.
-    summary = tasks.inverse_design(
+    summary = file_jobs.inverse_design(
         out, shape="semicircle", size=(0.03,), x0=1.28, num_frames=16,
         simulator="gns", objective="centroid", target_x=1.0, steps=2,
         learning_rate=0.01, sweep_points=2, workdir=self.workdir)
@@ -51,17 +51,17 @@ class InverseDesignTest(absltest.TestCase):
 
   def test_bad_inputs_are_refused(self):
     with self.assertRaisesRegex(ValueError, r"x = 1.4.*\[0.5, 1.3\]"):
-      tasks.inverse_design(tempfile.mkdtemp(), x0=1.4, num_frames=12,
+      file_jobs.inverse_design(tempfile.mkdtemp(), x0=1.4, num_frames=12,
                            simulator="mpm", workdir=None)
     with self.assertRaisesRegex(ValueError, "semicircle needs 1"):
-      tasks.inverse_design(tempfile.mkdtemp(), size=(0.03, 0.04),
+      file_jobs.inverse_design(tempfile.mkdtemp(), size=(0.03, 0.04),
                            num_frames=12)
     with self.assertRaisesRegex(ValueError, "must exceed the 6 input frames "
                                 "at stride 2"):
-      tasks.inverse_design(tempfile.mkdtemp(), num_frames=12,
+      file_jobs.inverse_design(tempfile.mkdtemp(), num_frames=12,
                            simulator="gns", workdir=self.workdir)
     with self.assertRaisesRegex(ValueError, "simulator.*allowed"):
-      tasks.inverse_design(tempfile.mkdtemp(), simulator="fem",
+      file_jobs.inverse_design(tempfile.mkdtemp(), simulator="fem",
                            num_frames=12, workdir=None)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import mpm
-from experiments import tasks
+from experiments.studies import settings
 from gnsjax import run as run_lib
 from gnsjax import data
 from gnsjax import features
@@ -20,6 +20,7 @@ from gnsjax import graph
 from gnsjax import metrics
 from gnsjax import models
 from gnsjax import rollout
+from gnsjax import run as run_lib
 from gnsjax import simulator
 from mpm import geometry
 from tests.gnsjax import fixtures
@@ -436,7 +437,7 @@ class PretrainedStabilityTest(absltest.TestCase):
   def setUpClass(cls):
     super().setUpClass()
     # From the checkpoint alone (its stored config and problem).
-    run = run_lib.load_run(tasks.PRETRAINED)
+    run = run_lib.load_run(settings.PRETRAINED)
     cls.problem, cls.params = run.problem, run.params
     cls.predictor = simulator.ModelPredictor(run.model)
     cls.scenes = [resting_scene(200, 0.9, 0.04, cls.problem.sdf_spacing),

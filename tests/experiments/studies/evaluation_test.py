@@ -1,6 +1,8 @@
-"""Tests for `experiments.evaluation`: the scores of a rollout, by hand and
-on a tiny trained run at a frame stride."""
+"""Tests for `experiments.studies.evaluation`: the scores of a rollout, by
+hand and on a tiny trained run at a frame stride; the study's settings, files
+and report."""
 
+import json
 import os
 import tempfile
 
@@ -8,11 +10,12 @@ from absl.testing import absltest
 import numpy as np
 
 import mpm
-from experiments import evaluation
+from experiments.studies import evaluation
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
 from gnsjax import rollout
+from gnsjax import run as run_lib
 from gnsjax import train
 from mpm import io as mpm_io
 from tests.gnsjax import fixtures
@@ -49,7 +52,7 @@ def problem(c, k):
   stats = features.Stats(*(np.full(2, v, np.float32)
                            for v in (0.0, 1e-3, 0.0, 1e-4)))
   bounds = ((0.0, 0.4), (0.0, 0.3))
-  return train.Problem(stats, np.asarray(bounds, np.float32), 0.03,
+  return run_lib.Problem(stats, np.asarray(bounds, np.float32), 0.03,
                        graph.GraphSpec(0.03, bounds), input_frames=c,
                        frame_stride=k)
 
@@ -150,12 +153,12 @@ class RolloutSplitTest(absltest.TestCase):
   def setUpClass(cls):
     super().setUpClass()
     cls._tmp = tempfile.TemporaryDirectory()
-    workdir = os.path.join(cls._tmp.name, "run")
+    workdir = cls.workdir = os.path.join(cls._tmp.name, "run")
     config = fixtures.tiny_config(num_steps=2, frame_stride=2)
     config.checkpoint.every_steps = 2
     cls.data = fixtures.tiny_dataset()
     train.train_and_evaluate(config, cls.data, workdir)
-    cls.trained = train.load_run(workdir)
+    cls.trained = run_lib.load_run(workdir)
     cls.path = data.split_path(cls.data, "test")
     cls.results = evaluation.rollout_split(cls.trained, cls.path,
                                            max_trajectories=2)
@@ -191,6 +194,44 @@ class RolloutSplitTest(absltest.TestCase):
         [evaluation.per_trajectory_row(r) for r in self.results])[0]
     self.assertEqual(summary["trajectories"], 2)
     self.assertIn("free_max_inside_solids", summary)
+
+  def test_run_writes_its_files_and_its_report_reads_the_summary(self):
+    out = os.path.join(self._tmp.name, "evaluation")
+    summary = evaluation.run(evaluation.Settings(
+        workdir=self.workdir, data=self.data, max_trajectories=1,
+        timing_repeats=1, checkpoint_errors=False, unconstrained=False), out)
+    for name in ("summary.json", "report.md", "trajectories.csv",
+                 "groups.csv", "table2.csv", "flow_checks.png"):
+      self.assertTrue(os.path.exists(os.path.join(out, name)), name)
+    # The same rollout as rollout_split's, without the unconstrained one.
+    (row,) = summary["rows"]
+    self.assertEqual(row, {
+        k: v for k, v in evaluation.per_trajectory_row(self.results[0]).items()
+        if not k.startswith("free_")})
+    with open(os.path.join(out, "report.md")) as f:
+      self.assertEqual(f.read(), evaluation.report(summary))
+    # The report needs nothing but the summary: the JSON written reads back.
+    with open(os.path.join(out, "summary.json")) as f:
+      self.assertEqual(evaluation.report(json.load(f)),
+                       evaluation.report(summary))
+    self.assertIn(f"| 0 | {row['group']} |", evaluation.report(summary))
+
+
+class SettingsTest(absltest.TestCase):
+
+  def test_refusals_name_the_flag(self):
+    good = {"workdir": "run", "data": "data"}
+    evaluation.Settings(**good)
+    for changes, message in (
+        ({"workdir": None}, "--workdir is required"),
+        ({"data": None}, "--data is required"),
+        ({"max_trajectories": 0}, "--max_trajectories=0: allowed: >= 1"),
+        ({"timing_repeats": 0}, "--timing_repeats=0: allowed: >= 1"),
+        ({"checkpoint_trajectories": 0},
+         "--checkpoint_trajectories=0: allowed: >= 1")):
+      with self.assertRaisesRegex(mpm.InputError, "^" + message,
+                                  msg=str(changes)):
+        evaluation.Settings(**(good | changes))
 
 
 if __name__ == "__main__":

@@ -1,7 +1,10 @@
-"""The paper's evaluation of a trained run on a dataset (section III).
+"""The paper's evaluation of a trained run on a dataset (section III): the
+study ``evaluation``, whose entry point keeps the users' name
+``python -m experiments.evaluate``.
 
-``evaluate(workdir, data_dir, out_dir)`` writes PNG figures (through
-``experiments.figures``), every number as CSV/JSON, and a Markdown report:
+``run(Settings(workdir=..., data=...), out_dir)`` writes PNG figures
+(through ``experiments.figures``), every number as CSV/JSON, and a Markdown
+report (``report``):
 
 - Fig. 3: training loss against steps; Fig. 4: training time against steps
   (from ``metrics.csv``);
@@ -24,8 +27,8 @@ stride) and are compared with the MPM at the stored frames they predict.
 """
 
 import csv
+import dataclasses
 import os
-import time
 from typing import Any, Sequence
 
 import jax
@@ -34,10 +37,12 @@ import tqdm
 
 import mpm
 from experiments import figures
+from experiments import timing
+from experiments.studies import settings
 from gnsjax import data
 from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
-from gnsjax import train
+from gnsjax import run as run_lib
 from mpm import dataset as dataset_lib
 from mpm import io as mpm_io
 
@@ -62,7 +67,7 @@ def describe(scene: mpm.Scene) -> dict:
 
 
 def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
-          frames: np.ndarray, problem: train.Problem) -> dict:
+          frames: np.ndarray, problem: run_lib.Problem) -> dict:
   """Every metric of one rollout against its MPM trajectory.
 
   Args:
@@ -96,7 +101,7 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
   }
 
 
-def rollout_split(run: train.Run, path: str,
+def rollout_split(run: run_lib.Run, path: str,
                   max_trajectories: int | None = None,
                   unconstrained: bool = True) -> list[dict]:
   """Rolls out every trajectory of a split from its first frames.
@@ -219,22 +224,14 @@ def group_summary(rows: Sequence[dict]) -> list[dict]:
   return out
 
 
-def _median_time(fn, repeats: int) -> float:
-  times = []
-  for _ in range(repeats):
-    start = time.perf_counter()
-    fn()
-    times.append(time.perf_counter() - start)
-  return float(np.median(times))
-
-
-def table2(run: train.Run, results: Sequence[dict],
+def table2(run: run_lib.Run, results: Sequence[dict],
            repeats: int = 3) -> list[dict]:
   """MPM vs GNS seconds per simulation, one scene per test group.
 
   The MPM time is ``mpm.simulate``'s simulation time (compilation excluded,
   each chunk synchronised); the GNS time is a whole rollout after a warm-up
-  rollout (compilation excluded), synchronised by fetching the result.
+  rollout (compilation excluded), synchronised by fetching the result. Both
+  are medians of ``repeats`` (``experiments.timing``).
   """
   rows = []
   seen = set()
@@ -243,13 +240,12 @@ def table2(run: train.Run, results: Sequence[dict],
       continue
     seen.add(r["group"])
     t = r["trajectory"]
-    mpm.simulate(t.scene)  # compile
-    mpm_s = float(np.median([mpm.simulate(t.scene).wall_time_s
-                             for _ in range(repeats)]))
+    _, mpm_timing = timing.self_timed(lambda: mpm.simulate(t.scene),
+                                      repeats, lambda r: r.wall_time_s)
     run_once = lambda: rollout_lib.rollout_trajectory(run.model, run.params,
                                                       t, run.problem)
-    run_once()  # compile
-    gns = _median_time(run_once, repeats)
+    gns_timing = timing.time_calls({"gns": run_once}, repeats)["gns"]
+    mpm_s, gns = mpm_timing["median_s"], gns_timing["median_s"]
     rows.append({
         "group": r["group"], "particles": r["particles"],
         "obstacles": r["obstacles"], "frames": len(t.positions),
@@ -260,93 +256,111 @@ def table2(run: train.Run, results: Sequence[dict],
 
 
 def read_csv(path: str) -> list[dict]:
+  """The rows of a CSV file (e.g. a run's ``metrics.csv``) as dicts of
+  strings; none if there is no such file."""
   if not os.path.exists(path):
     return []
   with open(path, newline="") as f:
     return list(csv.DictReader(f))
 
 
-# The entry points' CSV writer (atomic).
-write_csv = mpm_io.write_csv
+# ------------------------------------------------------------------ study ---
 
 
-def evaluate(workdir: str, data_dir: str, out_dir: str, *,
-             max_trajectories: int | None = None, timing_repeats: int = 3,
-             checkpoint_errors: bool = True,
-             checkpoint_trajectories: int | None = None,
-             unconstrained: bool = True) -> dict[str, Any]:
-  """Writes the paper's figures, numbers and a report for a trained run.
+@dataclasses.dataclass(frozen=True)
+class Settings(settings.Base):
+  """Which run to evaluate on which data, and how much of it."""
+  workdir: str = settings.field(None, "Training run directory.")
+  data: str = settings.field(None, "Dataset directory.")
+  max_trajectories: int | None = settings.field(
+      None, "Evaluate only the first test trajectories.", lower=1)
+  timing_repeats: int = settings.field(
+      3, "Repeats of each Table 2 timing (median).", lower=1)
+  checkpoint_errors: bool = settings.field(
+      True, "Also evaluate the named checkpoints (Fig. 5).")
+  unconstrained: bool = settings.field(
+      True, "Also roll out without the solid constraint, to report how much "
+      "sand the model alone puts inside solids.")
+  checkpoint_trajectories: int | None = settings.field(
+      None, "Test trajectories per checkpoint for Fig. 5 (default: all "
+      "evaluated).", lower=1)
 
-  Args:
-    max_trajectories: evaluate the first test trajectories only.
-    timing_repeats: repeats of each Table 2 timing (median reported).
-    checkpoint_errors: also roll out the named checkpoints (Fig. 5).
-    checkpoint_trajectories: test trajectories for Fig. 5 (default: as
-      many as the rest of the evaluation).
-    unconstrained: also roll out without the solid constraint, to report
-      how much sand the model alone would put inside solids.
+
+def run(s: Settings, out_dir: str) -> dict[str, Any]:
+  """Writes the paper's figures, numbers and a report for a trained run:
+  ``summary.json``, ``report.md``, ``trajectories.csv``, ``groups.csv``,
+  ``table2.csv`` and the figures (Figs. 3-9, ``flow_checks.png``) in
+  ``out_dir``.
+
+  Returns:
+    The summary: the run and its problem, ``test_mse`` (m^2), ``groups``
+    (``group_summary``), ``rows`` (``per_trajectory_row`` of each test
+    trajectory), ``curves`` (Figs. 6-9), ``checkpoint_test_mse`` (step ->
+    m^2) and ``table2``.
   """
-  test_path = data.split_path(data_dir, "test")
-  run = train.load_run(workdir)
+  test_path = data.split_path(s.data, "test")
+  trained = run_lib.load_run(s.workdir)
   os.makedirs(out_dir, exist_ok=True)
   summary: dict[str, Any] = {
-      "workdir": workdir, "data": data_dir, "step": run.step,
+      "workdir": s.workdir, "data": s.data, "step": trained.step,
       "device": str(jax.devices()[0]),
-      "frame_stride": run.problem.frame_stride,
-      "input_frames": run.problem.input_frames,
-      "boundary_particles": run.problem.boundary_particles}
+      "frame_stride": trained.problem.frame_stride,
+      "input_frames": trained.problem.input_frames,
+      "boundary_particles": trained.problem.boundary_particles}
 
-  log = read_csv(os.path.join(workdir, "metrics.csv"))
+  log = read_csv(os.path.join(s.workdir, "metrics.csv"))
   if log:
     figures.training_curves(log, out_dir)
 
-  results = rollout_split(run, test_path, max_trajectories, unconstrained)
+  results = rollout_split(trained, test_path, s.max_trajectories,
+                          s.unconstrained)
   frame_dt = results[0]["trajectory"].scene.frame_dt
   curves = breakdown(results)
   figures.breakdown_curves(curves, results[0]["frames"] * frame_dt, out_dir)
   figures.flow_checks(results, frame_dt, os.path.join(out_dir,
                                                       "flow_checks.png"))
   rows = [per_trajectory_row(r) for r in results]
-  write_csv(os.path.join(out_dir, "trajectories.csv"), rows)
+  mpm_io.write_csv(os.path.join(out_dir, "trajectories.csv"), rows)
   groups = group_summary(rows)
-  write_csv(os.path.join(out_dir, "groups.csv"), groups)
+  mpm_io.write_csv(os.path.join(out_dir, "groups.csv"), groups)
   summary["test_mse"] = float(np.mean([np.mean(r["mse"]) for r in results]))
   summary["test_mse_constant_velocity"] = float(np.mean(
       [np.mean(r["mse_constant_velocity"]) for r in results]))
   summary["groups"] = groups
+  summary["rows"] = rows
   summary["curves"] = {fig: {k: v.tolist() for k, v in g.items()}
                        for fig, g in curves.items()}
 
   errors = {}
-  if checkpoint_errors:
-    named = set(run.config.checkpoint.named_steps) | {run.step}
-    for s in checkpoint_steps(workdir):
-      if s in named:
-        if s == run.step:
-          res = results[:checkpoint_trajectories]
+  if s.checkpoint_errors:
+    named = set(trained.config.checkpoint.named_steps) | {trained.step}
+    for step in checkpoint_steps(s.workdir):
+      if step in named:
+        if step == trained.step:
+          res = results[:s.checkpoint_trajectories]
         else:
-          res = rollout_split(train.load_run(workdir, s), test_path,
-                              checkpoint_trajectories or max_trajectories,
+          res = rollout_split(run_lib.load_run(s.workdir, step), test_path,
+                              s.checkpoint_trajectories or s.max_trajectories,
                               unconstrained=False)
-        errors[s] = float(np.mean([np.mean(r["mse"]) for r in res]))
+        errors[step] = float(np.mean([np.mean(r["mse"]) for r in res]))
     if errors:
       figures.checkpoint_errors(errors, os.path.join(out_dir,
                                                      "fig5_test_error.png"))
   summary["checkpoint_test_mse"] = errors
-  summary["checkpoint_trajectories"] = (checkpoint_trajectories or
+  summary["checkpoint_trajectories"] = (s.checkpoint_trajectories or
                                         len(results))
 
-  table = table2(run, results, timing_repeats)
-  write_csv(os.path.join(out_dir, "table2.csv"), table)
+  table = table2(trained, results, s.timing_repeats)
+  mpm_io.write_csv(os.path.join(out_dir, "table2.csv"), table)
   summary["table2"] = table
   mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
-  mpm_io.write_text(os.path.join(out_dir, "report.md"),
-                    report(summary, rows))
+  mpm_io.write_text(os.path.join(out_dir, "report.md"), report(summary))
   return summary
 
 
-def report(summary: dict, rows: Sequence[dict]) -> str:
-  """The Markdown report of an evaluation."""
+def report(summary: dict[str, Any]) -> str:
+  """The Markdown report of an evaluation (``run``'s summary, or the
+  ``summary.json`` it wrote)."""
   lines = [
       "# Evaluation", "",
       f"Run `{summary['workdir']}` at step {summary['step']}, test split of "
@@ -394,8 +408,8 @@ def report(summary: dict, rows: Sequence[dict]) -> str:
       lines.append(f"| {fig} | {label} | {np.mean(curve):.3e} | "
                    f"{curve[-1]:.3e} |")
   lines += ["", "## Table 2: seconds per simulation, this hardware, one run",
-            "", "| group | particles | obstacles | frames | GNS steps | MPM (s) "
-            "| GNS (s) | MPM/GNS | GNS MSE (m^2) |",
+            "", "| group | particles | obstacles | frames | GNS steps | "
+            "MPM (s) | GNS (s) | MPM/GNS | GNS MSE (m^2) |",
             "|---|---|---|---|---|---|---|---|---|"]
   for r in summary["table2"]:
     lines.append(f"| {r['group']} | {r['particles']} | {r['obstacles']} | "
@@ -409,7 +423,7 @@ def report(summary: dict, rows: Sequence[dict]) -> str:
       "## Per trajectory", "",
       "| # | group | particles | mean MSE | front error | deposit error (m) "
       "| inside | free: inside at end |", "|---|---|---|---|---|---|---|---|"]
-  for r in rows:
+  for r in summary["rows"]:
     lines.append(
         f"| {r['index']} | {r['group']} | {r['particles']} | "
         f"{r['mean_mse']:.2e} | {r['front_error_relative']:.1%} | "
