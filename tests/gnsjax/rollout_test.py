@@ -13,7 +13,6 @@ import pytest
 
 import mpm
 from experiments.studies import settings
-from gnsjax import run as run_lib
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
