@@ -4,7 +4,7 @@
 
 ``run_benchmark(out_dir)`` measures, in one run on this machine, for the MPM
 and the GNS on the small config's scene (250 particles, the shipped model
-``tasks.PRETRAINED``, loaded with ``train.load_run``) and on a paper scene
+``tasks.PRETRAINED``, loaded by ``rollouts.gns_driver``) and on a paper scene
 (1000 particles; the paper-sized GNS of ``configs/paper.py`` with untrained
 weights, since cost does not depend on the weights), each through the
 ``gnsjax.design`` rollouts (``mpm_positions``, ``gns_positions``: the
@@ -40,7 +40,8 @@ from gnsjax import features
 from gnsjax import models
 from gnsjax import train
 from gnsjax.design import objectives
-from gnsjax.design import study
+from gnsjax.design import rollouts
+from gnsjax.design import scenes
 
 GB = 1024**3
 RATIO_TARGET = 4.0
@@ -199,9 +200,9 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
   frames = 20 if quick else 600
   paper_gns_frames = 12 if quick else 50
   objective = objectives.make("passed_fraction", x_protect=0.4).smooth
-  small = tasks.design_scene("semicircle", (0.04,), 1.0, frames)
-  paper = tasks.design_scene("semicircle", (0.04,), 1.0, frames,
-                             spacing=0.005, num_particles=1000)
+  small = scenes.one_obstacle("semicircle", (0.04,), 1.0, frames)
+  paper = scenes.one_obstacle("semicircle", (0.04,), 1.0, frames,
+                              spacing=0.005, num_particles=1000)
   mpm_driver = lambda scene: design.MPMDriver(
       design.MPMRollout.create(design.Placement(scene)))
   rows = []
@@ -215,7 +216,7 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
                       frames, frames, repeats, log))
   rows.append(measure(
       "GNS small model, small scene",
-      study.gns_driver(design.Placement(small), tasks.PRETRAINED),
+      rollouts.gns_driver(design.Placement(small), tasks.PRETRAINED),
       objective, frames, frames, repeats, log))
   placement = design.Placement(paper)
   model, params, problem = paper_gns(placement)

@@ -1,7 +1,9 @@
-"""Inverse design against the baselines at equal wall time, on the MPM.
+"""Inverse design against the baselines at equal wall time, on the MPM
+(``python -m experiments.inverse_design --problem=... --method=a,b,...``).
 
-``compare(...)`` runs each method on one placement problem under the same
-budget (wall time and/or evaluations), every design judged by the MPM:
+``run(settings, out_dir)`` runs each method on one placement problem under
+the same budget (wall time and/or evaluations), every design judged by the
+MPM:
 
 - ``adam``: projected Adam on the plain pathwise gradient of the smooth
   objective (``optimize.optimise``);
@@ -9,6 +11,11 @@ budget (wall time and/or evaluations), every design judged by the MPM:
   objective smoothed at ``sigma`` (``smoothing.SmoothedDriver``);
 - ``cmaes``, ``random``, ``sweep``: ``baselines``, batched (one vmapped MPM
   program per batch of designs).
+
+The problems (``PROBLEMS``): ``placement`` (one obstacle, the design
+study's: x, and its size with ``optimise_size``), ``two_obstacles`` (two
+semicircles, x and radius each) and ``baffles`` (a row of small rectangles,
+their x); the scenes are ``gnsjax.design.scenes``'.
 
 Each method's programs are compiled and run once before its clock starts
 (``warmup_s``, reported apart), so the budget is spent on the search. The
@@ -23,28 +30,34 @@ seconds, value, best so far, the design), ``summary.json``, ``report.md``
 against wall time per method).
 """
 
+import dataclasses
 import os
 import time
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import tqdm
 
-import mpm
+from experiments import figures
+from experiments import timing
+from experiments.studies import design
+from experiments.studies import settings
 from gnsjax.design import baselines
 from gnsjax.design import objectives
 from gnsjax.design import optimize
 from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
+from gnsjax.design import scenes
 from gnsjax.design import smoothing
 from mpm import io as mpm_io
+from mpm import sampler
 
 METHODS = ("adam", "adam_smoothed", "cmaes", "random", "sweep")
-# The placement problems of issue 14 (calibration: ``calibration.study``).
+# The placement problems of issue 14 (calibration: ``studies.calibration``).
 PROBLEMS = ("placement", "two_obstacles", "baffles")
-# A baffle: a small rectangle (m), within Table 1's rectangle sizes.
-BAFFLE_SIZE = (0.02, 0.04)
+BAFFLES = (2, 8)   # baffles in a row: the range allowed
 
 
 def step_scale(placement: placement_lib.AnyPlacement,
@@ -75,34 +88,29 @@ def _adam_trace(history: list[dict]) -> list[dict]:
 
 
 def run_method(method: str, placement: placement_lib.AnyPlacement,
-               objective: objectives.Objective, budget: baselines.Budget, *,
-               num_frames: int | None = None, learning_rate: float = 0.05,
-               sigma: float = 0.05, num_samples: int = 16,
-               batch_size: int = 8, sweep_points: int = 3, seed: int = 0,
-               sim: rollouts.MPMRollout | None = None,
-               log: Callable[[str], None] = print) -> dict[str, Any]:
-  """One method under ``budget``: its trace and its warm-up seconds.
+               objective: objectives.Objective, s: "Settings",
+               sim: rollouts.MPMRollout | None = None) -> dict[str, Any]:
+  """One method under the settings' budget: its trace and its warm-up
+  seconds.
 
   Args:
     method: one of ``METHODS``.
     placement: the problem.
     objective: Adam follows ``smooth``; every design is judged by ``plain``.
-    budget: seconds and/or evaluations (for Adam: gradient evaluations).
-    num_frames: of the rollouts (default the scene's).
-    learning_rate: Adam's step (m) on positions; sizes take the same
-      fraction of their range (``step_scale``).
-    sigma: smoothing scale (m) of ``adam_smoothed`` on positions, scaled
-      like the steps on sizes; num_samples: its perturbed designs.
-    batch_size: designs per MPM program of the baselines (CMA-ES's
-      population).
-    sweep_points: grid values per parameter of ``sweep``.
-    seed: of the baselines' and the smoothing's random numbers.
+    s: the budget (for Adam: gradient evaluations), Adam's step (m) on
+      positions (sizes take the same fraction of their range:
+      ``step_scale``), the smoothing scale (m) and samples of
+      ``adam_smoothed`` (scaled like the steps on sizes), the baselines'
+      batch (CMA-ES's population) and ``sweep``'s grid values per
+      parameter, the seed of the baselines' and the smoothing's random
+      numbers.
     sim: the MPM rollout (built if None).
   """
   if method not in METHODS:
     raise ValueError(f"method: unknown {method!r}; allowed: {list(METHODS)}")
+  budget = s.budget()
   budget.check()
-  sim = sim or rollouts.MPMRollout.create(placement, num_frames)
+  sim = sim or rollouts.MPMRollout.create(placement)
   start = placement.initial()
   low, high = placement.bounds()
   if method in ("adam", "adam_smoothed"):
@@ -110,21 +118,21 @@ def run_method(method: str, placement: placement_lib.AnyPlacement,
     if method == "adam_smoothed":
       scale = step_scale(placement, start)
       driver = smoothing.SmoothedDriver(
-          driver, sigma=jax.tree.map(lambda c: sigma * c, scale),
-          num_samples=num_samples, estimator="score", seed=seed)
+          driver, sigma=jax.tree.map(lambda c: s.sigma * c, scale),
+          num_samples=s.num_samples, estimator="score", seed=s.seed)
     t = time.perf_counter()
     driver.value_and_grad(objective.smooth, start)          # compiles
     warmup = time.perf_counter() - t
 
     def log_record(r):
-      log(f"{method} iteration {r['iteration']}: {objective.name} = "
-          f"{r['plain']:.5g} (smooth {r['objective']:.5g}), "
-          f"{r['seconds']:.1f} s")
+      _log(f"{method} iteration {r['iteration']}: {objective.name} = "
+           f"{r['plain']:.5g} (smooth {r['objective']:.5g}), "
+           f"{r['seconds']:.1f} s")
 
     history = optimize.optimise(
         driver, objective.smooth, start,
         steps=budget.evaluations or np.iinfo(np.int32).max,
-        learning_rate=learning_rate, log=log_record,
+        learning_rate=s.learning_rate, log=log_record,
         max_seconds=budget.seconds, plain=objective.plain,
         step_scale=step_scale(placement, start))
     # The design of each record, as a vector (records hold flat floats).
@@ -132,16 +140,17 @@ def run_method(method: str, placement: placement_lib.AnyPlacement,
       r["vector"] = placement.to_vector(_record_params(r, start)).tolist()
     trace = _adam_trace(history)
   else:
-    fn = baselines.MPMBatchObjective(sim, objective.plain, batch_size)
+    fn = baselines.MPMBatchObjective(sim, objective.plain, s.batch_size)
     t = time.perf_counter()
     fn(placement.to_vector(start)[None])                    # compiles
     warmup = time.perf_counter() - t
     trace = baselines.run(method, fn, low, high, placement.to_vector(start),
-                          budget=budget, batch_size=batch_size, seed=seed,
-                          points=sweep_points, project=fn.project)
+                          budget=budget, batch_size=s.batch_size,
+                          seed=s.seed, points=s.sweep_points,
+                          project=fn.project)
   best = min(trace, key=lambda r: r["value"])
-  log(f"{method}: {len(trace)} evaluations, best {objective.name} = "
-      f"{best['value']:.5g} at {best['seconds']:.1f} s")
+  _log(f"{method}: {len(trace)} evaluations, best {objective.name} = "
+       f"{best['value']:.5g} at {best['seconds']:.1f} s")
   return {"method": method, "trace": trace, "warmup_s": warmup}
 
 
@@ -160,47 +169,149 @@ def _record_params(record: dict, like: placement_lib.Params
   return out
 
 
-def best_at(trace: Sequence[dict], seconds: float) -> float:
-  """The best value reached by ``seconds`` of wall time (inf if none)."""
-  values = [r["value"] for r in trace if r["seconds"] <= seconds]
-  return min(values) if values else float("inf")
+# --------------------------------------------------------------- settings ---
 
 
-def compare(out_dir: str, placement: placement_lib.AnyPlacement,
-            objective: objectives.Objective, methods: Sequence[str],
-            budget: baselines.Budget, *, problem: str = "two_obstacles",
-            progress: Callable[[Sequence[str]], Any] = iter,
-            log: Callable[[str], None] = print, **kwargs) -> dict[str, Any]:
-  """Runs ``methods`` on ``placement`` under ``budget`` each, verifies each
-  best design with the MPM and writes the files (module docstring).
+@dataclasses.dataclass(frozen=True)
+class Budget(settings.Base):
+  """Methods run one after another, each under the same budget."""
+  method: tuple[str, ...] = settings.field(
+      ("adam",), "One or more (comma-separated) of: adam (plain gradients), "
+      "adam_smoothed (gradients of the objective smoothed at --sigma), "
+      "cmaes, random, sweep (baselines, batched MPM).")
+  budget_s: float | None = settings.field(
+      None, "Wall-time budget (s) per method, after compilation.", lower=0,
+      strict=True)
+  budget_evals: int | None = settings.field(
+      None, "Evaluation budget per method (designs; for Adam, gradient "
+      "evaluations).", lower=1)
+  batch_size: int = settings.field(
+      8, "Designs per batched MPM program of the baselines (CMA-ES's "
+      "population).", lower=2)
+  seed: int = settings.field(0, "Seed of the baselines and the smoothing.")
 
-  Args:
-    out_dir: where the files go.
-    placement: the problem.
-    objective: what to minimise.
-    methods: some of ``METHODS``.
-    budget: per method.
-    problem: its name, for the report.
-    progress: wraps the loop over methods (e.g. ``tqdm.tqdm``).
-    log: one line per iteration or method.
-    **kwargs: of ``run_method``.
+  def validate(self):
+    super().validate()
+    unknown = [m for m in self.method if m not in METHODS]
+    if unknown or len(set(self.method)) != len(self.method):
+      raise settings.InputError(
+          f"--method={','.join(self.method)}: allowed: one or more distinct "
+          f"of {', '.join(METHODS)}")
+    if self.budget_s is None and self.budget_evals is None:
+      raise settings.InputError("the comparison of methods needs a budget; "
+                                "allowed: --budget_s > 0 and/or "
+                                "--budget_evals >= 1")
+
+  def budget(self) -> baselines.Budget:
+    return baselines.Budget(self.budget_evals, self.budget_s)
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings(design.Common, Budget):
+  """Every method of ``method`` on one problem, at equal budget."""
+  problem: str = settings.field(
+      "two_obstacles", "placement: one obstacle (x, and its size with "
+      "--optimise_size); two_obstacles: two semicircles, x and radius each "
+      "(4 parameters); baffles: a row of --num_baffles small rectangles, "
+      "their x.", choices=PROBLEMS, flag=False)
+  xs: tuple[float, ...] = settings.field(
+      (0.9, 1.1), "two_obstacles: starting base positions (m), in [%g, %g]."
+      % placement_lib.X_RANGE)
+  radii: tuple[float, ...] = settings.field(
+      (0.04, 0.04), "two_obstacles: starting radii (m), in [%g, %g]."
+      % sampler.SIZE_RANGES["semicircle"]["radius"])
+  num_baffles: int = settings.field(
+      5, "baffles: how many, in a row (%d-%d)." % BAFFLES)
+
+  def builds_obstacle(self) -> bool:
+    return self.problem == "placement"
+
+  def validate(self):
+    super().validate()
+    self.check_samples()
+    if self.problem == "placement" and self.scene is not None:
+      raise settings.InputError("--scene: the comparison of methods builds "
+                                "its scene; allowed: --shape, --size, --x0")
+    if self.problem == "baffles":
+      lo, hi = BAFFLES
+      if not lo <= self.num_baffles <= hi:
+        raise settings.InputError(f"--num_baffles={self.num_baffles}; "
+                                  f"allowed: {lo}-{hi}")
+    if self.problem == "two_obstacles":
+      self._check_two_obstacles()
+
+  def _check_two_obstacles(self):
+    xs, radii = self.xs, self.radii
+    for name, values in (("xs", xs), ("radii", radii)):
+      if len(values) != 2:
+        raise settings.InputError(f"--{name}={_joined(values)}: allowed: 2 "
+                                  "comma-separated numbers (m)")
+    lo, hi = placement_lib.X_RANGE
+    for k, x in enumerate(xs):
+      if not lo <= x <= hi:
+        raise settings.InputError(
+            f"--xs={_joined(xs)}: obstacle {k} at x = {x:g}; allowed: "
+            f"[{lo:g}, {hi:g}] m")
+    rlo, rhi = sampler.SIZE_RANGES["semicircle"]["radius"]
+    for k, r in enumerate(radii):
+      if not rlo <= r <= rhi:
+        raise settings.InputError(
+            f"--radii={_joined(radii)}: obstacle {k} of radius {r:g}; "
+            f"allowed: [{rlo:g}, {rhi:g}] m")
+    if abs(xs[1] - xs[0]) < radii[0] + radii[1]:
+      raise settings.InputError(
+          f"--xs={_joined(xs)} with --radii={_joined(radii)}: the obstacles "
+          f"overlap; allowed: base centres at least {radii[0] + radii[1]:g} "
+          "m apart")
+
+  def placement(self) -> placement_lib.AnyPlacement:
+    """The problem's placement: its scene and free parameters."""
+    if self.problem == "two_obstacles":
+      return placement_lib.MultiPlacement(
+          scenes.two_obstacles(self.xs, self.radii, self.num_frames))
+    if self.problem == "baffles":
+      return placement_lib.MultiPlacement(
+          scenes.baffles(self.num_baffles, self.num_frames),
+          indices=tuple(range(self.num_baffles)), free=("x",))
+    return placement_lib.Placement(
+        self.design_scene(),
+        free=("x", "size") if self.optimise_size else ("x",))
+
+
+def _joined(values) -> str:
+  return ",".join(f"{v:g}" for v in values)
+
+
+def _log(line: str) -> None:
+  tqdm.tqdm.write(line)
+
+
+# ------------------------------------------------------------------ study ---
+
+
+def run(s: Settings, out_dir: str) -> dict[str, Any]:
+  """Runs each method of ``s.method`` on ``s.problem`` under the budget,
+  verifies each best design with the MPM and writes the files (module
+  docstring).
 
   Returns:
     The summary (summary.json).
   """
-  unknown = [m for m in methods if m not in METHODS]
-  if unknown or not methods:
-    raise ValueError(f"methods: {list(methods)}; allowed: some of "
-                     f"{list(METHODS)}")
-  budget.check()
-  sim = rollouts.MPMRollout.create(placement, kwargs.pop("num_frames", None))
+  return compare(s, s.placement(), s.make_objective(), out_dir)
+
+
+def compare(s: Settings, placement: placement_lib.AnyPlacement,
+            objective: objectives.Objective, out_dir: str) -> dict[str, Any]:
+  """``run`` on any placement problem and objective (``s.problem`` names
+  it in the files)."""
+  sim = rollouts.MPMRollout.create(placement)
   driver = rollouts.MPMDriver(sim)
   os.makedirs(out_dir, exist_ok=True)
+  env = timing.environment(False, affinity=sorted(os.sched_getaffinity(0)))
   start_value = objective.plain(driver.rollout(placement.initial()))
   runs, rows = [], []
-  for method in progress(list(methods)):
-    result = run_method(method, placement, objective, budget, sim=sim,
-                        log=log, **kwargs)
+  for method in tqdm.tqdm(s.method, desc="methods", unit="method"):
+    result = run_method(method, placement, objective, s, sim)
     best = min(result["trace"], key=lambda r: r["value"])
     params = placement.from_vector(best["vector"])
     placement.check(params)
@@ -216,45 +327,54 @@ def compare(out_dir: str, placement: placement_lib.AnyPlacement,
                                                      "value", "best")},
               **dict(zip(placement.names, r["vector"]))}
              for r in result["trace"]]
+  timing.end_environment(env)
   mpm_io.write_csv(os.path.join(out_dir, "trace.csv"), rows)
   winner = min(runs, key=lambda r: (r["verified"], r["best_at_s"]))
   summary = {
-      "problem": problem, "scene": placement.scene.to_dict(),
+      "problem": s.problem, "scene": placement.scene.to_dict(),
       "parameters": list(placement.names), "objective": objective.name,
-      "unit": objective.unit, "budget": budget._asdict(),
+      "unit": objective.unit, "budget": s.budget()._asdict(),
       "start": dict(zip(placement.names,
                         placement.to_vector(placement.initial()).tolist())),
       "start_value": start_value, "runs": runs, "winner": winner["method"],
-      "settings": {k: v for k, v in kwargs.items()},
-      "environment": environment()}
+      "settings": {k: getattr(s, k) for k in (
+          "learning_rate", "sigma", "num_samples", "batch_size",
+          "sweep_points", "seed")},
+      "environment": env}
   mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
-  with open(os.path.join(out_dir, "report.md"), "w") as f:
-    f.write(report(summary))
-  plot(rows, summary, os.path.join(out_dir, "objective_vs_time.png"))
+  mpm_io.write_text(os.path.join(out_dir, "report.md"), report(summary))
+  figures.objective_vs_time(rows, summary,
+                            os.path.join(out_dir, "objective_vs_time.png"))
   return summary
 
 
-def environment() -> dict[str, Any]:
-  import platform  # pylint: disable=g-import-not-at-top
-  return {"machine": platform.machine(), "processor": platform.processor(),
-          "cpus": os.cpu_count(), "affinity": sorted(os.sched_getaffinity(0)),
-          "load_average": list(os.getloadavg()), "jax": jax.__version__,
-          "backend": jax.default_backend()}
+def budget_text(budget: dict[str, Any]) -> str:
+  """A budget (``summary["budget"]``) in words."""
+  return " and ".join(x for x in (
+      f"{budget['seconds']:g} s" if budget["seconds"] else "",
+      f"{budget['evaluations']} evaluations" if budget["evaluations"] else "")
+                      if x)
 
 
-def report(summary: dict) -> str:
+def machine_text(env: dict[str, Any]) -> str:
+  """The machine of a run (``timing.environment``) in one sentence."""
+  return (f"Machine: {env['cpu_count']} CPUs ({env['machine']}), run on "
+          f"cores {env['affinity']}, load average "
+          f"{', '.join(f'{x:.2f}' for x in env['load_average_start'])} at "
+          "the start and "
+          f"{', '.join(f'{x:.2f}' for x in env['load_average_end'])} at the "
+          f"end; jax {env['jax_version']} on {env['jax_backend']}.")
+
+
+def report(summary: dict[str, Any]) -> str:
   """report.md: the table of methods at equal budget, in words."""
   unit = f" {summary['unit']}" if summary["unit"] else ""
-  b = summary["budget"]
-  limit = " and ".join(x for x in (
-      f"{b['seconds']:g} s" if b["seconds"] else "",
-      f"{b['evaluations']} evaluations" if b["evaluations"] else "") if x)
   lines = [
       f"# Inverse design, {summary['problem']}: {summary['objective']}", "",
       f"Parameters: {', '.join(summary['parameters'])}; start "
       f"{_fmt(summary['start'])}, MPM objective "
-      f"{summary['start_value']:.5g}{unit}. Budget per method: {limit} "
-      "(after compilation).", "",
+      f"{summary['start_value']:.5g}{unit}. Budget per method: "
+      f"{budget_text(summary['budget'])} (after compilation).", "",
       "| method | evaluations | warm-up (s) | best (MPM) | reached at (s) "
       "| verified (MPM) | design |",
       "|---|---:|---:|---:|---:|---:|---|"]
@@ -263,81 +383,11 @@ def report(summary: dict) -> str:
         f"| {r['method']} | {r['evaluations']} | {r['warmup_s']:.1f} | "
         f"{r['best']:.5g} | {r['best_at_s']:.1f} | {r['verified']:.5g} | "
         f"{_fmt(r['design'])} |")
-  e = summary["environment"]
   lines += ["", f"Winner (lowest verified objective, then earliest): "
             f"**{summary['winner']}**.", "",
-            f"Machine: {e['cpus']} CPUs ({e['machine']}), run on cores "
-            f"{e['affinity']}, load average at the end "
-            f"{', '.join(f'{x:.2f}' for x in e['load_average'])}; jax "
-            f"{e['jax']} on {e['backend']}."]
+            machine_text(summary["environment"])]
   return "\n".join(lines) + "\n"
 
 
-def _fmt(design: dict) -> str:
-  return ", ".join(f"{k} = {v:.4g}" for k, v in design.items())
-
-
-def plot(rows: list[dict], summary: dict, out: str) -> str:
-  """Best MPM objective so far against wall time, one line per method."""
-  import matplotlib  # pylint: disable=g-import-not-at-top
-  matplotlib.use("Agg")
-  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
-  fig, ax = plt.subplots(figsize=(6.5, 4))
-  for r in summary["runs"]:
-    pts = [(q["seconds"], q["best"]) for q in rows
-           if q["method"] == r["method"]]
-    t, v = zip(*pts)
-    ax.step(t, v, where="post", label=f"{r['method']} "
-            f"({r['evaluations']} evals)")
-  ax.axhline(summary["start_value"], color="gray", ls=":", label="start")
-  values = [q["best"] for q in rows] + [summary["start_value"]]
-  if min(values) > 0 and max(values) / min(values) > 100:
-    ax.set_yscale("log")   # misfits that fall by decades
-  ax.set_xlabel("wall time after compilation (s)")
-  unit = f" ({summary['unit']})" if summary["unit"] else ""
-  ax.set_ylabel(f"best {summary['objective']} so far, MPM{unit}")
-  ax.set_title(f"{summary['problem']}: {len(summary['parameters'])} "
-               "parameters", fontsize=10)
-  ax.legend(fontsize=8)
-  fig.tight_layout()
-  tmp = f"{out}.tmp-{os.getpid()}.png"
-  fig.savefig(tmp, dpi=100)
-  plt.close(fig)
-  os.replace(tmp, out)
-  return out
-
-
-def baffles_scene(count: int = 5, num_frames: int = 600,
-                  spacing: float = 0.01, num_particles: int = 250,
-                  x_range: Sequence[float] = placement_lib.X_RANGE
-                  ) -> mpm.Scene:
-  """The paper's heap with a row of ``count`` baffles (``BAFFLE_SIZE``
-  rectangles) evenly spaced over ``x_range``, their centres one reach in
-  from its ends."""
-  width, height = BAFFLE_SIZE
-  reach = float(np.hypot(width / 2, height))
-  lo, hi = x_range
-  xs = np.linspace(lo + reach, hi - reach, count)
-  return mpm.Scene.from_dict({
-      "name": f"design_baffles_{count}",
-      "granular": {"box": list(mpm.Scene().granular.box), "spacing": spacing,
-                   "num_particles": num_particles},
-      "num_frames": num_frames,
-      "obstacles": [{"shape": "rectangle", "x": float(x), "width": width,
-                     "height": height} for x in xs]})
-
-
-def two_obstacles_scene(x: Sequence[float] = (0.9, 1.1),
-                        radius: Sequence[float] = (0.04, 0.04),
-                        num_frames: int = 600, spacing: float = 0.01,
-                        num_particles: int = 250) -> mpm.Scene:
-  """The paper's heap (the small config's spacing) with two semicircles
-  (validated: off the ramp or overlapping raise InputError)."""
-  scene = mpm.Scene.from_dict({
-      "name": "design_two_obstacles",
-      "granular": {"box": list(mpm.Scene().granular.box), "spacing": spacing,
-                   "num_particles": num_particles},
-      "num_frames": num_frames,
-      "obstacles": [{"shape": "semicircle", "x": float(a), "radius": float(r)}
-                    for a, r in zip(x, radius)]})
-  return scene
+def _fmt(design_: dict) -> str:
+  return ", ".join(f"{k} = {v:.4g}" for k, v in design_.items())

@@ -1,5 +1,6 @@
-"""Tests for `gnsjax.design.comparison`: every method under one budget on a
-tiny two-obstacle scene, judged and verified by the MPM."""
+"""Tests for `experiments.studies.design_comparison`: every method under one
+budget on a tiny two-obstacle scene, judged and verified by the MPM; the
+settings' refusals."""
 
 import csv
 import os
@@ -8,8 +9,8 @@ import tempfile
 from absl.testing import absltest
 import numpy as np
 
-from gnsjax.design import baselines
-from gnsjax.design import comparison
+import mpm
+from experiments.studies import design_comparison
 from gnsjax.design import objectives
 from gnsjax.design import placement as placement_lib
 from tests.gnsjax.design.fixtures import TWO_OBSTACLES
@@ -22,10 +23,11 @@ class CompareTest(absltest.TestCase):
     p = placement_lib.MultiPlacement(scene(obstacles=TWO_OBSTACLES,
                                            num_frames=12))
     out = tempfile.mkdtemp()
-    summary = comparison.compare(
-        out, p, objectives.make("runout"), comparison.METHODS,
-        baselines.Budget(evaluations=4), learning_rate=0.01, sigma=0.01,
-        num_samples=2, batch_size=2, sweep_points=2, log=lambda _: None)
+    settings = design_comparison.Settings(
+        method=design_comparison.METHODS, budget_evals=4, learning_rate=0.01,
+        sigma=0.01, num_samples=2, batch_size=2, sweep_points=2)
+    summary = design_comparison.compare(settings, p, objectives.make("runout"),
+                                        out)
     for name in ("trace.csv", "summary.json", "report.md",
                  "objective_vs_time.png"):
       self.assertTrue(os.path.exists(os.path.join(out, name)), name)
@@ -44,39 +46,51 @@ class CompareTest(absltest.TestCase):
         v = np.asarray([float(r[n]) for n in p.names])
         self.assertTrue(np.all(v >= lo - 1e-6) and np.all(v <= hi + 1e-6))
         p.check(p.from_vector(v))
-    self.assertIn(summary["winner"], comparison.METHODS)
+    self.assertIn(summary["winner"], design_comparison.METHODS)
     with open(os.path.join(out, "report.md")) as f:
-      self.assertIn("| cmaes | 4 |", f.read())
+      report = f.read()
+    self.assertIn("| cmaes | 4 |", report)
+    self.assertIn("Budget per method: 4 evaluations", report)
+    self.assertIn("load average", report)
 
   def test_step_scale_follows_the_ranges(self):
     p = placement_lib.MultiPlacement(scene(obstacles=TWO_OBSTACLES))
-    s = comparison.step_scale(p, p.initial())
+    s = design_comparison.step_scale(p, p.initial())
     np.testing.assert_allclose(s["x"], [1, 1])
     np.testing.assert_allclose(s["size"], np.full((2, 2), 0.03 / 0.8),
                                rtol=1e-5)
 
 
 
-class BafflesTest(absltest.TestCase):
+class SettingsTest(absltest.TestCase):
 
-  def test_a_row_of_baffles_in_range_and_kept_apart(self):
-    scene = comparison.baffles_scene(6, num_frames=2)
-    shapes = {(o.shape, o.width, o.height) for o in scene.obstacles}
-    self.assertEqual(shapes, {("rectangle",) + comparison.BAFFLE_SIZE})
-    p = placement_lib.MultiPlacement(scene, indices=tuple(range(6)),
-                                     free=("x",))
-    x = p.to_vector(p.initial())
-    lo, hi = placement_lib.X_RANGE
-    reach = scene.obstacles[0].reach
-    self.assertLen(x, 6)
-    np.testing.assert_allclose([x[0] - reach, x[-1] + reach], [lo, hi])
-    # Three baffles asked at one place are pushed apart, inside the range.
-    x[1:4] = 0.9
-    repaired = p.to_vector(p.project(p.from_vector(x)))
-    gaps = np.diff(np.sort(repaired))
-    self.assertTrue(np.all(gaps >= 2 * reach - 1e-6), gaps)
-    self.assertTrue(np.all((repaired >= lo) & (repaired <= hi)))
-    p.check(p.from_vector(repaired))
+  def test_bad_settings_are_refused_naming_their_flags(self):
+    ok = {"budget_s": 10.0}
+    for changes, message in (
+        ({}, "needs a budget; allowed: --budget_s > 0 and/or --budget_evals"),
+        ({**ok, "method": ("adam", "nope")}, "^--method=adam,nope: allowed: "
+         "one or more distinct of adam, adam_smoothed, cmaes, random, sweep"),
+        ({**ok, "method": ("adam", "adam")}, "one or more distinct"),
+        ({**ok, "num_samples": 3}, "^--num_samples=3; allowed: an even"),
+        ({**ok, "problem": "baffles", "num_baffles": 9},
+         "^--num_baffles=9; allowed: 2-8"),
+        ({**ok, "xs": (1.0,)}, "^--xs=1: allowed: 2 comma-separated"),
+        ({**ok, "xs": (1.0, 1.05)}, "the obstacles overlap; allowed: base "
+         "centres at least 0.08 m apart"),
+        ({**ok, "xs": (0.9, 1.5)}, "^--xs=0.9,1.5: obstacle 1 at x = 1.5; "
+         r"allowed: \[0.5, 1.3\] m"),
+        ({**ok, "radii": (0.04, 0.2)}, r"obstacle 1 of radius 0.2; allowed: "
+         r"\[0.02, 0.05\] m"),
+        ({**ok, "problem": "placement", "scene": "a.json"},
+         "^--scene: the comparison of methods builds its scene"),
+        ({**ok, "problem": "placement", "x0": 0.3},
+         r"^--x0=0.3; allowed: \[0.5, 1.3\] m")):
+      with self.assertRaisesRegex(mpm.InputError, message, msg=str(changes)):
+        design_comparison.Settings(**changes)
+    # What a problem does not read is not checked.
+    design_comparison.Settings(**ok, problem="baffles", xs=(1.0, 1.05))
+    design_comparison.Settings(**ok, x0=0.3)
+
 
 
 if __name__ == "__main__":
