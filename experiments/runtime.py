@@ -32,6 +32,9 @@ EXIT_BAD_INPUT = 2
 _VERBOSE = flags.DEFINE_bool(
     "verbose", False, "On bad input, show the traceback, not only the "
     "one-line error.")
+# The flags define_flags defines below belong to the entry point that calls
+# it (they are its key flags: --helpshort lists them), not to this module.
+flags.disclaim_key_flags()
 
 
 def _refuse(error: Exception) -> None:

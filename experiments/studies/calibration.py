@@ -39,7 +39,7 @@ class Settings(design.Search, design_comparison.Budget):
       (33.3, 0.37), "calibrate: the friction angle (deg) and basal friction "
       "that make the observed deposit (hidden from the search).")
   start: tuple[float, ...] = settings.field(
-      (25.0, 0.8), "calibrate: where the search starts (friction angle in "
+      (25, 0.8), "calibrate: where the search starts (friction angle in "
       "deg, basal friction).")
 
   def validate(self):
