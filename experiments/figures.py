@@ -5,7 +5,9 @@
   GNS), each a trajectory [T, N, 2] (m) of sand drawn over the scene: ramp
   and obstacles as filled solids, axes in metres, a legend.
 - ``objective_vs_x``: an inverse-design study's objective against the
-  obstacle's x (m), by MPM and GNS sweeps, with the optimiser's path.
+  obstacle's x (m), by MPM and GNS sweeps, with the optimiser's path;
+  ``objective_vs_time``: the best objective so far against wall time of
+  methods compared at equal budget.
 - The evaluation's figures: training curves (the paper's Figs. 3-4), test
   error by checkpoint (Fig. 5), error-against-time breakdowns (Figs. 6-9),
   and the flow checks a positional MSE misses (sand inside solids or outside
@@ -145,7 +147,7 @@ def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
 
   Args:
     sweep: per simulator ("mpm", "gns"), rows with "x" (m) and "smooth"
-      (``gnsjax.design.study.StudyResult.sweep``).
+      (``experiments.studies.design``'s sweep).
     history: the optimiser's records, with "x" and "objective".
     objective: its name (the y label).
     simulator: whose gradients the optimiser followed.
@@ -169,9 +171,43 @@ def objective_vs_x(sweep: dict[str, list[dict]], history: Sequence[dict],
   ax.set_xlabel("obstacle x (m)")
   ax.set_ylabel(f"{objective} (smooth)")
   ax.legend(fontsize=8)
-  fig.tight_layout()
-  fig.savefig(out, dpi=100)
-  plt.close(fig)
+  _save(fig, out)
+  return out
+
+
+def objective_vs_time(rows: Sequence[dict], summary: dict, out: str) -> str:
+  """Writes a PNG of the best MPM objective so far against wall time, one
+  line per method.
+
+  Args:
+    rows: every evaluation, with "method", "seconds" (s after compilation)
+      and "best" (the method's best value so far): trace.csv's rows
+      (``experiments.studies.design_comparison``, ``calibration``).
+    summary: with "runs" (each with "method", "evaluations"),
+      "start_value", "objective", "unit", "problem" and "parameters".
+    out: the PNG's path.
+
+  Returns:
+    The path written.
+  """
+  fig, ax = plt.subplots(figsize=(6.5, 4))
+  for r in summary["runs"]:
+    pts = [(q["seconds"], q["best"]) for q in rows
+           if q["method"] == r["method"]]
+    t, v = zip(*pts)
+    ax.step(t, v, where="post", label=f"{r['method']} "
+            f"({r['evaluations']} evals)")
+  ax.axhline(summary["start_value"], color="gray", ls=":", label="start")
+  values = [q["best"] for q in rows] + [summary["start_value"]]
+  if min(values) > 0 and max(values) / min(values) > 100:
+    ax.set_yscale("log")   # misfits that fall by decades
+  ax.set_xlabel("wall time after compilation (s)")
+  unit = f" ({summary['unit']})" if summary["unit"] else ""
+  ax.set_ylabel(f"best {summary['objective']} so far, MPM{unit}")
+  ax.set_title(f"{summary['problem']}: {len(summary['parameters'])} "
+               "parameters", fontsize=10)
+  ax.legend(fontsize=8)
+  _save(fig, out)
   return out
 
 

@@ -34,6 +34,9 @@ EXIT_BAD_INPUT = 2
 _VERBOSE = flags.DEFINE_bool(
     "verbose", False, "Show INFO logs (the libraries' too), and on bad "
     "input the traceback, not only the one-line error.")
+# The flags define_flags defines below belong to the entry point that calls
+# it (they are its key flags: --helpshort lists them), not to this module.
+flags.disclaim_key_flags()
 
 
 def _refuse(error: Exception) -> None:
@@ -145,33 +148,40 @@ _DEFINE = {bool: flags.DEFINE_bool, int: flags.DEFINE_integer,
            float: flags.DEFINE_float, str: flags.DEFINE_string}
 
 
-def define_flags(settings_cls: type,
+def define_flags(settings_cls: type | tuple[type, ...],
                  flag_values: flags.FlagValues = flags.FLAGS,
                  **defaults) -> dict[str, Any]:
   """One flag per field of a study's ``Settings`` (``studies.settings``),
   with the field's name, default and help; ``defaults`` replace a field's
   default for this entry point only. Fields marked ``flag=False`` get none.
 
+  An entry point that runs one of several studies passes their classes
+  together: a field that several of them hold (by inheritance from one
+  settings group) gets one flag, from the first class that flags it.
+
   Returns:
     field name -> its FlagHolder, for :func:`settings_from_flags`.
   """
-  hints = typing.get_type_hints(settings_cls)
+  classes = (settings_cls if isinstance(settings_cls, tuple) else
+             (settings_cls,))
   holders = {}
-  for f in dataclasses.fields(settings_cls):
-    if not f.metadata.get("flag", True):
-      continue
-    kind, sequence, _ = settings_lib.element_type(hints[f.name])
-    default = defaults.get(f.name, f.default)
-    help_text = f.metadata.get("help", "")
-    if f.metadata.get("choices"):
-      help_text += f" One of {', '.join(f.metadata['choices'])}."
-    if sequence:
-      holders[f.name] = flags.DEFINE_list(
-          f.name, None if default is None else [str(v) for v in default],
-          help_text, flag_values=flag_values)
-    else:
-      holders[f.name] = _DEFINE[kind](f.name, default, help_text,
-                                      flag_values=flag_values)
+  for cls in classes:
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+      if not f.metadata.get("flag", True) or f.name in holders:
+        continue
+      kind, sequence, _ = settings_lib.element_type(hints[f.name])
+      default = defaults.get(f.name, f.default)
+      help_text = f.metadata.get("help", "")
+      if f.metadata.get("choices"):
+        help_text += f" One of {', '.join(f.metadata['choices'])}."
+      if sequence:
+        holders[f.name] = flags.DEFINE_list(
+            f.name, None if default is None else [str(v) for v in default],
+            help_text, flag_values=flag_values)
+      else:
+        holders[f.name] = _DEFINE[kind](f.name, default, help_text,
+                                        flag_values=flag_values)
   return holders
 
 
@@ -188,9 +198,14 @@ def _parse(name: str, given: list[str], kind: type) -> tuple:
 def settings_from_flags(settings_cls: type, holders: dict[str, Any],
                         **values):
   """The ``Settings`` the flags (and ``values``, for fields without a flag)
-  describe, checked; raises InputError naming the flag."""
+  describe, checked; raises InputError naming the flag. Holders of flags
+  that are not fields of ``settings_cls`` (another study's) are left out."""
   hints = typing.get_type_hints(settings_cls)
+  flagged = {f.name for f in dataclasses.fields(settings_cls)
+             if f.metadata.get("flag", True)}
   for name, holder in holders.items():
+    if name not in flagged:
+      continue
     kind, sequence, _ = settings_lib.element_type(hints[name])
     value = holder.value
     if sequence and value is not None:

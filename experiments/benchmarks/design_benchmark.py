@@ -4,7 +4,7 @@
 
 ``run_benchmark(out_dir)`` measures, in one run on this machine, for the MPM
 and the GNS on the small config's scene (250 particles, the shipped model
-``settings.PRETRAINED``, loaded with ``run_lib.load_run``) and on a paper scene
+``settings_lib.PRETRAINED``, loaded by ``rollouts.gns_driver``) and on a paper scene
 (1000 particles; the paper-sized GNS of ``configs/paper.py`` with untrained
 weights, since cost does not depend on the weights), each through the
 ``gnsjax.design`` rollouts (``mpm_positions``, ``gns_positions``: the
@@ -32,16 +32,16 @@ import resource
 
 import jax
 
-from experiments import file_jobs
+from experiments.studies import settings as settings_lib
 from experiments import timing
 from experiments.configs import paper as paper_config
-from experiments.studies import settings
 from gnsjax import design
 from gnsjax import features
 from gnsjax import models
-from gnsjax import run as run_lib
+from gnsjax import train
 from gnsjax.design import objectives
-from gnsjax.design import study
+from gnsjax.design import rollouts
+from gnsjax.design import scenes
 
 GB = 1024**3
 RATIO_TARGET = 4.0
@@ -60,7 +60,7 @@ def _memory_gb(program: timing.Compiled) -> dict:
 def untrained_gns(placement: design.Placement, config):
   """A GNS of ``config`` (``experiments/configs``) with untrained weights,
   and its problem on the placement's domain: (model, params, problem)."""
-  model = run_lib.create_model(config.model)
+  model = train.create_model(config.model)
   params = models.init_params(
       model, jax.random.key(0),
       features.num_node_features(config.train.input_frames))
@@ -71,7 +71,7 @@ def untrained_gns(placement: design.Placement, config):
             "acc_mean": [0.0, 0.0], "acc_std": [1e-6, 1e-6],
             "bounds": [[0.0, domain.width], [0.0, domain.height]],
             "radius": config.dataset.connectivity_radius, "noise_std": 0.0}
-  return model, params, run_lib.problem_from_dict(config, stored)
+  return model, params, train.problem_from_dict(config, stored)
 
 
 def paper_gns(placement: design.Placement):
@@ -200,9 +200,9 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
   frames = 20 if quick else 600
   paper_gns_frames = 12 if quick else 50
   objective = objectives.make("passed_fraction", x_protect=0.4).smooth
-  small = file_jobs.design_scene("semicircle", (0.04,), 1.0, frames)
-  paper = file_jobs.design_scene("semicircle", (0.04,), 1.0, frames,
-                             spacing=0.005, num_particles=1000)
+  small = scenes.one_obstacle("semicircle", (0.04,), 1.0, frames)
+  paper = scenes.one_obstacle("semicircle", (0.04,), 1.0, frames,
+                              spacing=0.005, num_particles=1000)
   mpm_driver = lambda scene: design.MPMDriver(
       design.MPMRollout.create(design.Placement(scene)))
   rows = []
@@ -216,7 +216,7 @@ def run_benchmark(out_dir: str, *, quick: bool = False, repeats: int = 2,
                       frames, frames, repeats, log))
   rows.append(measure(
       "GNS small model, small scene",
-      study.gns_driver(design.Placement(small), settings.PRETRAINED),
+      rollouts.gns_driver(design.Placement(small), settings_lib.PRETRAINED),
       objective, frames, frames, repeats, log))
   placement = design.Placement(paper)
   model, params, problem = paper_gns(placement)

@@ -169,6 +169,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
       "gns_max_outside_domain": row["max_outside_domain"],
       "gns_final_speed_m_s": row["final_speed"],
       "mpm_final_speed_m_s": row["mpm_final_speed"],
+      "gns_kinetic_energy_ratio": row["kinetic_energy_ratio"],
       "mpm_max_inside_solids": row["mpm_max_inside_solids"],
       "gns_mean_pushed_fraction": row["mean_pushed_fraction"],
   }

@@ -66,6 +66,11 @@ def describe(scene: mpm.Scene) -> dict:
   }
 
 
+# Seconds at the end of a rollout over which rest is scored (the sand's
+# kinetic energy, LagrangeBench's ``e_kin``, learned over MPM).
+REST_WINDOW_S = 0.25
+
+
 def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
           frames: np.ndarray, problem: run_lib.Problem) -> dict:
   """Every metric of one rollout against its MPM trajectory.
@@ -96,6 +101,10 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
       "mpm_inside_solids": metrics.inside_solids(truth, scene),
       "final_speed": metrics.final_speed(pred, times),
       "mpm_final_speed": metrics.final_speed(truth, times),
+      # The MPM at every stored frame: its own finest measure of rest.
+      "kinetic_energy_ratio": metrics.kinetic_energy_ratio(
+          pred, t.positions, times,
+          np.arange(len(t.positions)) * scene.frame_dt, REST_WINDOW_S),
       "pushed_fraction": out.pushed / n,
       "pushed_depth": out.depth,
   }
@@ -180,6 +189,7 @@ def per_trajectory_row(r: dict) -> dict:
       "max_pushed_depth": float(np.max(r["pushed_depth"])),
       "final_speed": r["final_speed"],
       "mpm_final_speed": r["mpm_final_speed"],
+      "kinetic_energy_ratio": r["kinetic_energy_ratio"],
   }
   if "free_inside_solids" in r:
     row.update(
@@ -214,6 +224,11 @@ def group_summary(rows: Sequence[dict]) -> list[dict]:
         "median_final_speed": float(np.median(col("final_speed"))),
         "median_mpm_final_speed": float(np.median(col("mpm_final_speed"))),
     }
+    if len(col("kinetic_energy_ratio")):
+      entry["median_kinetic_energy_ratio"] = float(np.median(
+          col("kinetic_energy_ratio")))
+      entry["max_kinetic_energy_ratio"] = float(np.max(
+          col("kinetic_energy_ratio")))
     if len(col("free_max_inside_solids")):
       entry["free_max_inside_solids"] = float(np.max(
           col("free_max_inside_solids")))
@@ -358,6 +373,10 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   return summary
 
 
+def _ratio(value) -> str:
+  return "" if value is None else f"{value:.3g}"
+
+
 def report(summary: dict[str, Any]) -> str:
   """The Markdown report of an evaluation (``run``'s summary, or the
   ``summary.json`` it wrote)."""
@@ -379,11 +398,13 @@ def report(summary: dict[str, Any]) -> str:
       "push. Front error: |front_GNS - front_MPM| at the last frame over the "
       "MPM's runout distance (median). Speed at the end: the sand's mean "
       "speed over the last 5 steps, GNS / MPM (median): a deposit that "
-      "jitters instead of resting shows here.", "",
+      "jitters instead of resting shows here. Kinetic energy: the sand's "
+      f"over the last {REST_WINDOW_S:g} s, GNS over MPM (median and worst; "
+      "1 rests as the MPM does).", "",
       "| group | n | mean MSE (m^2) | const. vel. | front error | deposit "
       "error (m) | inside | outside | free: inside | pushed/step | deepest "
-      "push (m) | speed at end (cm/s) |",
-      "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+      "push (m) | speed at end (cm/s) | kinetic energy ratio |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in summary["groups"]:
     lines.append(
         f"| {g['group']} | {g['trajectories']} | {g['mean_mse']:.2e} | "
@@ -394,7 +415,9 @@ def report(summary: dict[str, Any]) -> str:
         f"{g.get('free_max_inside_solids', float('nan')):.1%} | "
         f"{g['mean_pushed_fraction']:.2%} | {g['max_pushed_depth']:.4f} | "
         f"{100 * g['median_final_speed']:.1f} / "
-        f"{100 * g['median_mpm_final_speed']:.1f} |")
+        f"{100 * g['median_mpm_final_speed']:.1f} | "
+        f"{_ratio(g.get('median_kinetic_energy_ratio'))} / "
+        f"{_ratio(g.get('max_kinetic_energy_ratio'))} |")
   lines += [
       "", "## Test error by checkpoint (Fig. 5)", "",
       f"Over the first {summary['checkpoint_trajectories']} test "

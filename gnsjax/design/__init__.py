@@ -9,17 +9,21 @@ Layered on the public APIs of ``gnsjax`` and ``mpm``:
   surrogate to differentiate beside its plain value.
 - ``rollouts``: both simulators as pure, differentiable functions of the
   placement (``GNSRollout``, ``MPMRollout``: frozen pytrees whose settings
-  are static), and their host drivers (``GNSDriver``, ``MPMDriver``).
+  are static), and their host drivers (``GNSDriver``, ``MPMDriver``;
+  ``gns_driver`` loads a trained model's).
 - ``optimize``: projected Adam, the brute-force sweep, central differences.
 - ``smoothing``: gradients of the objective smoothed in the parameters at a
   user-set scale sigma (pathwise and score-function estimators, batched).
 - ``baselines``: random search, grid sweep and CMA-ES under a budget, on
-  the batched MPM; ``comparison``: every method at equal budget, verified.
+  the batched MPM.
+- ``scenes``: the problems' scenes (the paper's heap with one obstacle, two
+  semicircles, a row of baffles).
 - ``calibration``: the sand's friction angle and the basal friction from an
   observed final deposit (imported on its own).
-- ``study``: a whole study (optimise, MPM verdict, sweep; csv, json and a
-  report), imported on its own: it loads trained runs
-  (``gnsjax.evaluate``).
+
+The studies built on these (optimise and verify, methods at equal budget,
+the gradient check, the calibration) are in ``experiments.studies``; this
+package imports neither ``gnsjax.train`` nor matplotlib.
 
 The names most callers need are re-exported here::
 

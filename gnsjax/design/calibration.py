@@ -12,13 +12,16 @@ along x at the last frame (a Gaussian kernel density at ``centres``, so it
 is smooth in the parameters), as the mean squared difference relative to
 the observed one's mean square. A deposit's mass distribution carries its
 runout (basal friction) and its slope (friction angle).
+
+``calibrate`` runs one search (Adam or a baseline) under a budget; the
+study that compares them against the hidden truth is
+``experiments.studies.calibration``.
 """
 
 import dataclasses
 import math
-import os
 import time
-from typing import Any, Callable, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 from flax import struct
 import jax
@@ -28,13 +31,11 @@ import optax
 
 import mpm
 from mpm import boundary
-from mpm import io as mpm_io
 from mpm import scene as scene_lib
 from mpm import solver
 from mpm import transfer
 from gnsjax import metrics
 from gnsjax.design import baselines
-from gnsjax.design import comparison
 
 NAMES = ("friction_angle_deg", "basal_friction")
 # The ranges searched: the stability study's friction angles (docs/
@@ -283,93 +284,3 @@ def calibrate(method: str, problem: Calibration, start, *,
                           budget=budget, batch_size=problem.batch_size,
                           seed=seed, points=points)
   return {"trace": trace, "warmup_s": warmup}
-
-
-def study(out_dir: str, problem: Calibration, truth, start,
-          methods: Sequence[str], budget: baselines.Budget, *,
-          log: Callable[[str], None] = print, **kwargs) -> dict[str, Any]:
-  """Runs ``methods`` from ``start`` under ``budget`` each and writes
-  trace.csv, summary.json, report.md and objective_vs_time.png.
-
-  Each method's best trial is re-simulated and judged against ``truth``
-  (which no method sees): friction-angle error (deg), basal-friction error
-  and the final front's error (a fraction of the observed runout).
-  ``kwargs``: of ``calibrate``.
-  """
-  truth, start = check(truth), check(start)
-  unknown = [m for m in methods if m not in METHODS]
-  if unknown or not methods:
-    raise ValueError(f"methods: {list(methods)}; allowed: some of "
-                     f"{list(METHODS)}")
-  os.makedirs(out_dir, exist_ok=True)
-  start_value = float(problem(start[None])[0])
-  runs, rows = [], []
-  for method in methods:
-    result = calibrate(method, problem, start, budget=budget, **kwargs)
-    best = min(result["trace"], key=lambda r: r["value"])
-    theta = np.asarray(best["vector"])
-    run = {"method": method, "evaluations": len(result["trace"]),
-           "warmup_s": result["warmup_s"], "best": best["value"],
-           "best_at_s": best["seconds"],
-           "design": dict(zip(NAMES, theta.tolist())),
-           "friction_angle_error_deg": abs(theta[0] - truth[0]),
-           "basal_friction_error": abs(theta[1] - truth[1]),
-           "front_error": problem.front_error(theta)}
-    runs.append(run)
-    log(f"{method}: {_describe(theta)}, misfit {best['value']:.3g}, front "
-        f"error {run['front_error']:.2%}")
-    rows += [{"method": method, **{k: r[k] for k in ("evaluation", "seconds",
-                                                     "value", "best")},
-              **dict(zip(NAMES, r["vector"]))} for r in result["trace"]]
-  summary = {
-      "problem": "calibrate", "scene": problem.scene.to_dict(),
-      "parameters": list(NAMES), "objective": "deposit misfit", "unit": "",
-      "truth": dict(zip(NAMES, truth.tolist())),
-      "start": dict(zip(NAMES, start.tolist())), "start_value": start_value,
-      "start_front_error": problem.front_error(start),
-      "budget": budget._asdict(), "runs": runs,
-      "settings": dict(kwargs), "environment": comparison.environment()}
-  mpm_io.write_csv(os.path.join(out_dir, "trace.csv"), rows)
-  mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
-  mpm_io.write_text(os.path.join(out_dir, "report.md"), report(summary))
-  comparison.plot(rows, summary, os.path.join(out_dir, "objective_vs_time.png"))
-  return summary
-
-
-def _describe(theta) -> str:
-  return f"friction angle {theta[0]:.2f} deg, basal friction {theta[1]:.3f}"
-
-
-def report(summary: dict) -> str:
-  """report.md: each method's calibration against the hidden truth."""
-  t, s, b = summary["truth"], summary["start"], summary["budget"]
-  limit = " and ".join(x for x in (
-      f"{b['seconds']:g} s" if b["seconds"] else "",
-      f"{b['evaluations']} evaluations" if b["evaluations"] else "") if x)
-  e = summary["environment"]
-  lines = [
-      "# Calibration: friction angle and basal friction from a deposit", "",
-      f"Truth (hidden from the search): {_describe(list(t.values()))}. "
-      f"Start: {_describe(list(s.values()))} (misfit "
-      f"{summary['start_value']:.3g}, front error "
-      f"{summary['start_front_error']:.1%}). Budget per method: {limit} "
-      "(after compilation).", "",
-      "| method | evaluations | warm-up (s) | best misfit | reached at (s) "
-      "| friction angle (deg) | basal friction | angle error (deg) | basal "
-      "error | front error |",
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-  for r in summary["runs"]:
-    d = r["design"]
-    lines.append(
-        f"| {r['method']} | {r['evaluations']} | {r['warmup_s']:.1f} | "
-        f"{r['best']:.3g} | {r['best_at_s']:.1f} | "
-        f"{d['friction_angle_deg']:.2f} | {d['basal_friction']:.3f} | "
-        f"{r['friction_angle_error_deg']:.2f} | "
-        f"{r['basal_friction_error']:.3f} | {r['front_error']:.2%} |")
-  lines += ["", "Targets: friction angle within 1 deg, basal friction "
-            "within 0.02, final front within 2%.", "",
-            f"Machine: {e['cpus']} CPUs ({e['machine']}), run on cores "
-            f"{e['affinity']}, load average at the end "
-            f"{', '.join(f'{x:.2f}' for x in e['load_average'])}; jax "
-            f"{e['jax']} on {e['backend']}."]
-  return "\n".join(lines) + "\n"

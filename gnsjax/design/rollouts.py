@@ -22,12 +22,13 @@ Each step (GNS) or frame (MPM) is rematerialised in the backward pass
 the activations. Model and physical parameters are constants of the
 gradient; only the placement is differentiated.
 
-``GNSDriver`` and ``MPMDriver`` are the host-side boundary: they jit those
-functions (module-level programs, every input an argument), check MPM frames
-(``mpm.check_frames``) and grow an overflowing neighbour list. A gradient
-that is not finite is an error (``FloatingPointError``) that names the scene
-and the first frame from which it is not finite: found by bisection over
-truncated rollouts, so it costs only when it fails.
+``GNSDriver`` and ``MPMDriver`` are the host-side boundary (``gns_driver``
+loads a trained model's): they jit those functions (module-level programs,
+every input an argument), check MPM frames (``mpm.check_frames``) and grow
+an overflowing neighbour list. A gradient that is not finite is an error
+(``FloatingPointError``) that names the scene and the first frame from which
+it is not finite: found by bisection over truncated rollouts, so it costs
+only when it fails.
 """
 
 import dataclasses
@@ -43,6 +44,7 @@ import numpy as np
 import mpm
 from gnsjax import graph
 from gnsjax import rollout as rollout_lib
+from gnsjax import run as run_lib
 from gnsjax import simulator
 from gnsjax.design import placement as placement_lib
 from mpm import boundary
@@ -364,6 +366,18 @@ class GNSDriver:
 
 
 # ------------------------------------------------------------------- MPM ---
+
+
+def gns_driver(placement: placement_lib.Placement,
+               workdir: str) -> GNSDriver:
+  """The trained learned simulator in ``workdir`` (a run directory or a
+  shipped model, latest checkpoint) as a function of ``placement``, started
+  from the MPM's first input frames of its scene."""
+  run = run_lib.load_run(workdir)
+  window = mpm_window(placement.scene, run.problem.input_frames,
+                      run.problem.frame_stride)
+  return GNSDriver(GNSRollout.create(placement, run.model, run.problem,
+                                     window), run.params)
 
 
 def covering_nodes(placement: placement_lib.AnyPlacement,

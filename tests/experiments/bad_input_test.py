@@ -162,7 +162,10 @@ ROWS = (
      ["--what=nope", "--out={d}/out"], "--what=nope"),
     ("inverse_design_size", "experiments.inverse_design",
      ["--out={d}/out", "--simulator=mpm", "--workdir=", "--size=abc"],
-     "--size=abc: a semicircle needs ['radius']"),
+     "--size=abc; allowed: comma-separated numbers"),
+    ("inverse_design_size_count", "experiments.inverse_design",
+     ["--out={d}/out", "--simulator=mpm", "--workdir=", "--size=0.03,0.04"],
+     "--size=0.03,0.04: a semicircle needs ['radius']"),
     # Item 7: one range for --x0, below or above it.
     ("inverse_design_x0_low", "experiments.inverse_design",
      ["--out={d}/out", "--x0=0.3"], "--x0=0.3; allowed: [0.5, 1.3] m"),

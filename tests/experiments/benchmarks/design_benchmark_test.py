@@ -3,18 +3,18 @@
 from absl.testing import absltest
 import pytest
 
-from experiments import file_jobs
 from experiments.benchmarks import design_benchmark
 from experiments.configs import test as configs_test
 from gnsjax import design
 from gnsjax.design import objectives
+from gnsjax.design import scenes
 
 
 @pytest.mark.slow  # compiles an MPM rollout and its gradient three times
 class MeasureTest(absltest.TestCase):
 
   def test_memory_at_full_frames_is_of_the_longer_program(self):
-    scene = file_jobs.design_scene("semicircle", (0.04,), 1.0, 3)
+    scene = scenes.one_obstacle("semicircle", (0.04,), 1.0, 3)
     objective = objectives.make("passed_fraction", x_protect=0.4).smooth
     driver = design.MPMDriver(design.MPMRollout.create(
         design.Placement(scene)))
@@ -35,7 +35,7 @@ class MeasureTest(absltest.TestCase):
 class GnsMeasureTest(absltest.TestCase):
 
   def test_gns_row_of_an_untrained_model(self):
-    scene = file_jobs.design_scene("semicircle", (0.04,), 1.0, 8)
+    scene = scenes.one_obstacle("semicircle", (0.04,), 1.0, 8)
     placement = design.Placement(scene)
     model, params, problem = design_benchmark.untrained_gns(
         placement, configs_test.get_config())

@@ -52,9 +52,8 @@ def problem(c, k):
   stats = features.Stats(*(np.full(2, v, np.float32)
                            for v in (0.0, 1e-3, 0.0, 1e-4)))
   bounds = ((0.0, 0.4), (0.0, 0.3))
-  return run_lib.Problem(stats, np.asarray(bounds, np.float32), 0.03,
-                       graph.GraphSpec(0.03, bounds), input_frames=c,
-                       frame_stride=k)
+  return run_lib.Problem(stats, graph.GraphSpec(0.03, bounds),
+                         input_frames=c, frame_stride=k)
 
 
 class ScoreTest(absltest.TestCase):
@@ -117,17 +116,20 @@ class ScoreTest(absltest.TestCase):
          "front_error_relative": 0.1, "deposit_error": 0.01,
          "max_inside_solids": 0.0, "max_outside_domain": 0.0,
          "mean_pushed_fraction": 0.1, "max_pushed_depth": 1e-3,
-         "final_speed": 0.1, "mpm_final_speed": 0.0},
+         "final_speed": 0.1, "mpm_final_speed": 0.0,
+         "kinetic_energy_ratio": 2.0},
         {"group": "a", "mean_mse": 3.0, "mean_mse_constant_velocity": 6.0,
          "front_error_relative": 0.3, "deposit_error": 0.03,
          "max_inside_solids": 0.2, "max_outside_domain": 0.1,
          "mean_pushed_fraction": 0.3, "max_pushed_depth": 2e-3,
-         "final_speed": 0.3, "mpm_final_speed": 0.01},
+         "final_speed": 0.3, "mpm_final_speed": 0.01,
+         "kinetic_energy_ratio": 3000.0},
         {"group": "b", "mean_mse": 5.0, "mean_mse_constant_velocity": 2.0,
          "front_error_relative": 0.5, "deposit_error": 0.05,
          "max_inside_solids": 0.1, "max_outside_domain": 0.3,
          "mean_pushed_fraction": 0.2, "max_pushed_depth": 5e-3,
-         "final_speed": 0.2, "mpm_final_speed": 0.02}]
+         "final_speed": 0.2, "mpm_final_speed": 0.02,
+         "kinetic_energy_ratio": 10.0}]
     groups = {g["group"]: g for g in evaluation.group_summary(rows)}
     self.assertEqual(sorted(groups), ["a", "all", "b"])
     every, a = groups["all"], groups["a"]
@@ -140,6 +142,8 @@ class ScoreTest(absltest.TestCase):
     self.assertAlmostEqual(every["max_pushed_depth"], 5e-3)
     self.assertAlmostEqual(every["median_final_speed"], 0.2)
     self.assertAlmostEqual(every["median_mpm_final_speed"], 0.01)
+    self.assertAlmostEqual(every["median_kinetic_energy_ratio"], 10.0)
+    self.assertAlmostEqual(every["max_kinetic_energy_ratio"], 3000.0)
     self.assertAlmostEqual(a["mean_mse"], 2.0)
     self.assertAlmostEqual(a["median_deposit_error"], 0.02)
     self.assertAlmostEqual(a["mean_pushed_fraction"], 0.2)

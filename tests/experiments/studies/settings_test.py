@@ -33,6 +33,22 @@ class Example(settings.Base):
       raise settings.InputError(f"--limit={self.limit:g} is below --rate")
 
 
+@dataclasses.dataclass(frozen=True)
+class Group(settings.Base):
+  shared: int = settings.field(1, "Held by both studies.", lower=0)
+
+
+@dataclasses.dataclass(frozen=True)
+class First(Group):
+  mine: str = settings.field("a", "Only the first's.")
+  mode: str = settings.field("x", "Set by the entry point.", flag=False)
+
+
+@dataclasses.dataclass(frozen=True)
+class Second(Group):
+  mode: tuple[str, ...] = settings.field(("x",), "The second's list.")
+
+
 class SettingsTest(absltest.TestCase):
 
   def test_defaults_pass_and_each_bad_value_names_its_flag(self):
@@ -75,6 +91,18 @@ class SettingsTest(absltest.TestCase):
     values["spacings"].parse("")
     with self.assertRaisesRegex(mpm.InputError, "^--spacings is empty"):
       runtime.settings_from_flags(Example, holders)
+
+  def test_studies_of_one_entry_point_share_their_flags(self):
+    values = flags.FlagValues()
+    holders = runtime.define_flags((First, Second), values)
+    self.assertEqual(sorted(holders), ["mine", "mode", "shared"])
+    # The flag of a field that the first study sets itself is the second's.
+    self.assertEqual(values["mode"].default, ["x"])
+    values(["prog", "--shared=3", "--mode=y,z"])
+    self.assertEqual(runtime.settings_from_flags(First, holders, mode="q"),
+                     First(shared=3, mode="q"))
+    self.assertEqual(runtime.settings_from_flags(Second, holders),
+                     Second(shared=3, mode=("y", "z")))
 
 
 if __name__ == "__main__":

@@ -8,7 +8,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gnsjax.design import gradient_check
 from gnsjax.design import objectives
 from gnsjax.design import optimize
 from gnsjax.design import placement as placement_lib
@@ -180,29 +179,6 @@ class MPMSmoothingTest(absltest.TestCase):
       smoothing.mpm_smoothed_value_and_grad(
           self.sim, self.objective, {"x": jnp.float32(hi + 0.1)}, KEY,
           sigma=0.02)
-
-
-class GradientCheckTest(absltest.TestCase):
-
-  def test_report_counts_sign_agreements_with_the_slope(self):
-    row = {"x": 1.0, "sigma": 0.05, "num_samples": 4, "slope_smooth": 0.3,
-           "slope_plain": 0.25, "pathwise": -5.8, "pathwise_s": 1.0,
-           "smoothed_pathwise": 0.2, "smoothed_pathwise_stderr": 0.1,
-           "smoothed_pathwise_s": 2.0, "smoothed_score": -0.1,
-           "smoothed_score_stderr": 0.3, "smoothed_score_s": 1.5}
-    text = gradient_check.report([row, dict(row, x=0.8, pathwise=0.1)], "t")
-    self.assertIn("pathwise 1/2, smoothed_pathwise 2/2, smoothed_score 0/2",
-                  text)
-    self.assertIn("| 1.00 | 0.3 / 0.25 | -5.8 | 0.2 +- 0.1 |", text)
-    text = gradient_check.report([{**row, "difference_h0.001": 1.5}], "t")
-    self.assertIn("| differences, h = 0.001 m | jax.grad |", text)
-    self.assertIn("| 1.00 | 0.3 / 0.25 | 1.5 | -5.8 |", text)
-
-  def test_positions_whose_interval_leaves_the_range_are_refused(self):
-    with self.assertRaisesRegex(ValueError, r"x = 1.28 m: x \+- sigma"):
-      gradient_check.check(gradient_check.mpm_driver(scene()),
-                           objectives.make("runout"), [1.28], sigma=0.05,
-                           num_samples=2)
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
 """Which gradient predicts the objective's change at a scale sigma?
+(``python -m experiments.gradient_check``)
 
-At each obstacle position x of a scene, through the MPM or the learned
-simulator over the whole rollout, ``check`` compares with the slope of the
-objective between
-x - sigma and x + sigma (two forward runs, what a sweep at spacing 2 sigma
-sees):
+At each obstacle position x of the design study's scene (the small
+config's heap, 250 particles, a semicircle of radius 0.04 m), through the
+MPM or the learned simulator over the whole rollout, ``check`` compares
+with the slope of the objective between x - sigma and x + sigma (two
+forward runs, what a sweep at spacing 2 sigma sees):
 
 - the plain pathwise derivative (``jax.grad`` at x);
 - the smoothed gradient, pathwise estimator (``smoothing``, n samples);
@@ -13,38 +14,43 @@ sees):
 The finite-difference slope is itself the slope of the objective at scale
 sigma (of a box, not a Gaussian, smoothing), so agreement in sign and size
 is what a user needs from a descent direction at that scale.
+
+``run(settings, out_dir)`` writes ``rows.csv``, ``summary.json`` and
+``report.md`` (docs/inverse_design.md).
 """
 
+import dataclasses
+import os
 import time
-from typing import Callable, Sequence
+from typing import Any, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import tqdm
 
-import mpm
+from experiments.studies import design
+from experiments.studies import settings
 from gnsjax.design import objectives
 from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
+from gnsjax.design import scenes
 from gnsjax.design import smoothing
+from mpm import io as mpm_io
 
-
-def mpm_driver(scene: mpm.Scene) -> rollouts.MPMDriver:
-  """The MPM as a function of the first obstacle's x (``Placement``)."""
-  return rollouts.MPMDriver(rollouts.MPMRollout.create(
-      placement_lib.Placement(scene)))
+SIMULATORS = ("mpm", "gns")
 
 
 def check(driver, objective: objectives.Objective, xs: Sequence[float], *,
           sigma: float, num_samples: int, hs: Sequence[float] = (),
-          seed: int = 0, log: Callable[[str], None] = print) -> list[dict]:
+          seed: int = 0) -> list[dict]:
   """One row per x: the slope over [x - sigma, x + sigma] of the smooth and
   the plain objective, central differences of the smooth objective at each
   h in ``hs``, and the three gradients (with standard errors and seconds;
   the first of each kind includes compilation).
 
   Args:
-    driver: ``mpm_driver(scene)`` or a ``rollouts.GNSDriver``; its
+    driver: a ``rollouts.MPMDriver`` or ``rollouts.GNSDriver``; its
       placement moves the scene's first obstacle.
     objective: ``objectives.make(...)``; gradients are of ``smooth``.
     xs: obstacle positions (m), each with x +- sigma (and +- h) in the
@@ -92,7 +98,7 @@ def check(driver, objective: objectives.Objective, xs: Sequence[float], *,
       row[f"smoothed_{estimator}"] = float(grad["x"])
       row[f"smoothed_{estimator}_stderr"] = float(stderr["x"])
       row[f"smoothed_{estimator}_s"] = time.perf_counter() - start
-    log(", ".join(f"{k} {v:.4g}" for k, v in row.items()))
+    tqdm.tqdm.write(", ".join(f"{k} {v:.4g}" for k, v in row.items()))
     rows.append(row)
   return rows
 
@@ -124,3 +130,64 @@ def report(rows: Sequence[dict], title: str) -> str:
             "Sign agrees with the slope of the smooth objective: " +
             ", ".join(f"{k} {v}/{len(rows)}" for k, v in agree.items()) + "."]
   return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ study ---
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings(design.Objective, design.Smoothing):
+  """Where, at which scale and through which simulator to check."""
+  xs: tuple[float, ...] = settings.field(
+      (0.6, 0.8, 1.0, 1.2), "Obstacle positions (m).")
+  hs: tuple[float, ...] = settings.field(
+      (), "Steps (m) of extra central differences.", lower=0, strict=True,
+      allow_empty=True)
+  num_frames: int = settings.field(600, "Frames per rollout.", lower=2)
+  simulator: str = settings.field("mpm", "Whose gradients are checked.",
+                                  choices=SIMULATORS)
+  workdir: str = settings.field(
+      "experiments/pretrained/small",
+      "The trained learned simulator (--simulator=gns).")
+
+  def validate(self):
+    super().validate()
+    lo, hi = placement_lib.X_RANGE
+    for flag, name, reach in ((f"--sigma={self.sigma:g}", "sigma",
+                               self.sigma),
+                              ("--hs", "h", max(self.hs, default=0.0))):
+      bad = [x for x in self.xs if not lo <= x - reach <= x + reach <= hi]
+      if bad:
+        raise settings.InputError(
+            f"--xs: {bad} with {flag}: x +- {name} must lie in [{lo:g}, "
+            f"{hi:g}] m")
+    self.check_samples()
+
+
+def run(s: Settings, out_dir: str) -> dict[str, Any]:
+  """Checks the gradients at each x of ``s.xs`` (module docstring) and
+  writes the files.
+
+  Returns:
+    The summary (summary.json: the settings, the scene and the rows).
+  """
+  objective = s.make_objective()
+  scene = scenes.one_obstacle(num_frames=s.num_frames)
+  placement = placement_lib.Placement(scene)
+  driver = (rollouts.MPMDriver(rollouts.MPMRollout.create(placement))
+            if s.simulator == "mpm" else
+            rollouts.gns_driver(placement, s.workdir))
+  rows = check(driver, objective, s.xs, sigma=s.sigma,
+               num_samples=s.num_samples, hs=s.hs)
+  os.makedirs(out_dir, exist_ok=True)
+  mpm_io.write_csv(os.path.join(out_dir, "rows.csv"), rows)
+  summary = {
+      "scene": scene.to_dict(), "objective": s.objective,
+      "x_protect": s.x_protect, "target_x": s.target_x,
+      "temperature": s.temperature, "simulator": s.simulator,
+      "workdir": s.workdir if s.simulator == "gns" else None, "rows": rows}
+  mpm_io.write_json(os.path.join(out_dir, "summary.json"), summary)
+  mpm_io.write_text(os.path.join(out_dir, "report.md"), report(
+      rows, f"Gradient check ({s.simulator.upper()}): {s.objective}, "
+      f"{scene.name}, {s.num_frames} frames"))
+  return summary

@@ -1,4 +1,5 @@
-"""The inverse-design entry point's job on a short scene."""
+"""Tests for `experiments.studies.design`: the study on a short scene with a
+tiny trained GNS, and its refusals."""
 
 import json
 import os
@@ -6,12 +7,13 @@ import tempfile
 
 from absl.testing import absltest
 
-from experiments import file_jobs
+import mpm
+from experiments.studies import design
 from gnsjax import train
 from tests.gnsjax import fixtures
 
 
-class InverseDesignTest(absltest.TestCase):
+class DesignTest(absltest.TestCase):
 
   @classmethod
   def setUpClass(cls):
@@ -33,10 +35,10 @@ class InverseDesignTest(absltest.TestCase):
   def test_gns_study_writes_history_sweep_plot_and_verdict(self):
     out = tempfile.mkdtemp()
     # 16 frames: inputs 0, 2, ..., 10, learned steps to 12 and 14.
-    summary = file_jobs.inverse_design(
-        out, shape="semicircle", size=(0.03,), x0=1.28, num_frames=16,
+    summary = design.run(design.Settings(
+        shape="semicircle", size=(0.03,), x0=1.28, num_frames=16,
         simulator="gns", objective="centroid", target_x=1.0, steps=2,
-        learning_rate=0.01, sweep_points=2, workdir=self.workdir)
+        learning_rate=0.01, sweep_points=2, workdir=self.workdir), out)
     for name in ("history.csv", "sweep.csv", "objective_vs_x.png",
                  "summary.json", "report.md"):
       self.assertTrue(os.path.exists(os.path.join(out, name)), name)
@@ -50,19 +52,32 @@ class InverseDesignTest(absltest.TestCase):
     self.assertEqual(summary["sweep"]["points"], 2)
 
   def test_bad_inputs_are_refused(self):
-    with self.assertRaisesRegex(ValueError, r"x = 1.4.*\[0.5, 1.3\]"):
-      file_jobs.inverse_design(tempfile.mkdtemp(), x0=1.4, num_frames=12,
-                           simulator="mpm", workdir=None)
-    with self.assertRaisesRegex(ValueError, "semicircle needs 1"):
-      file_jobs.inverse_design(tempfile.mkdtemp(), size=(0.03, 0.04),
-                           num_frames=12)
+    for changes, message in (
+        ({"x0": 1.4}, r"^--x0=1.4; allowed: \[0.5, 1.3\] m"),
+        ({"size": (0.03, 0.04)}, r"^--size=0.03,0.04: a semicircle needs "
+         r"\['radius'\]; allowed: positive lengths in m"),
+        ({"size": (0.06,), "optimise_size": True},
+         r"radius in \[0.02, 0.05\] m \(--optimise_size\)"),
+        ({"simulator": "fem"}, r"^--simulator=fem: allowed: one of"),
+        ({"workdir": ""}, r"^--simulator=gns needs --workdir"),
+        ({"method": "adam_smoothed", "num_samples": 3},
+         r"^--num_samples=3; allowed: an even number"),
+        ({"temperature": 0.0}, r"^--temperature=0.0: allowed: > 0")):
+      with self.assertRaisesRegex(mpm.InputError, message, msg=str(changes)):
+        design.Settings(**changes)
+    # An odd sample count is no error where nothing is smoothed.
+    design.Settings(num_samples=3)
+    scene = os.path.join(self._tmp.name, "no_obstacle.json")
+    with open(scene, "w") as f:
+      json.dump({"name": "none", "num_frames": 12}, f)
+    with self.assertRaisesRegex(mpm.InputError, "no obstacle to design"):
+      design.run(design.Settings(scene=scene, simulator="mpm", workdir=""),
+                 os.path.join(self._tmp.name, "never"))
+    self.assertFalse(os.path.exists(os.path.join(self._tmp.name, "never")))
     with self.assertRaisesRegex(ValueError, "must exceed the 6 input frames "
                                 "at stride 2"):
-      file_jobs.inverse_design(tempfile.mkdtemp(), num_frames=12,
-                           simulator="gns", workdir=self.workdir)
-    with self.assertRaisesRegex(ValueError, "simulator.*allowed"):
-      file_jobs.inverse_design(tempfile.mkdtemp(), simulator="fem",
-                           num_frames=12, workdir=None)
+      design.run(design.Settings(num_frames=12, workdir=self.workdir),
+                 tempfile.mkdtemp())
 
 
 if __name__ == "__main__":
