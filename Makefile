@@ -33,7 +33,8 @@ bench: $(STAMP)
 
 # The pure-Python wheels an accelerator machine lacks (it has jax, flax, optax,
 # orbax-checkpoint, h5py, absl-py, tqdm and matplotlib, and no network), for
-# experiments/benchmarks/gpu.sh to install from .whl/ there (docs/performance.md).
+# experiments/benchmarks/gpu.sh to install from .whl/ there
+# (docs/performance.md).
 # jax-md's own needs at import (e3nn-jax, sympy, mpmath, attrs, einops,
 # frozendict) are here too; pymatgen is not: jax-md imports it only for its
 # materials modules, which gnsjax does not load.
@@ -50,7 +51,8 @@ wheels:
 	  --python-version 3.12 --implementation cp $(WHEEL_PLATFORMS) \
 	  -d $(WHEEL_DIR).tmp $(WHEELS)
 	rm -rf $(WHEEL_DIR) && mv $(WHEEL_DIR).tmp $(WHEEL_DIR)
-	@du -ch $(WHEEL_DIR)/*.whl | tail -1 | sed 's/total/in $(WHEEL_DIR)\/ (at most 64M can travel)/'
+	@du -ch $(WHEEL_DIR)/*.whl | tail -1 \
+	  | sed 's/total/in $(WHEEL_DIR)\/ (at most 64M can travel)/'
 
 clean:
 	rm -rf $(VENV) $(OUT) .jax_cache $(WHEEL_DIR)

@@ -193,6 +193,13 @@ def write_atomic(path: str, text: str) -> None:
   os.replace(tmp, path)
 
 
+def write_json(path: str, content: Any) -> None:
+  """Writes ``content`` as indented JSON (numpy values as numbers) to
+  ``path``, atomically."""
+  write_atomic(path, json.dumps(content, indent=1, default=_json_default)
+               + "\n")
+
+
 def write_results(out_dir: str, name: str, quick: bool,
                   results: dict[str, Any], markdown: str) -> list[str]:
   """Writes ``<name>[_quick].json`` and ``.md`` to ``out_dir`` (created).
