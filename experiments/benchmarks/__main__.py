@@ -140,12 +140,13 @@ def check_inputs(what: list[str]) -> None:
       raise app.UsageError(f"--cpu_reference={_CPU_REFERENCE.value}: no such"
                            " file (the report of --what=gpu run on the CPU)")
   if "gpu" in what and _GPU_PARTS.value == ["report"]:
-    accelerator = gpu_benchmark.is_accelerator()
-    if not gpu_benchmark.read_parts(_OUT.value, accelerator, _QUICK.value):
+    if not any(gpu_benchmark.read_parts(_OUT.value, role, _QUICK.value)
+               for role in (True, False)):
+      q = "_quick" if _QUICK.value else ""
       raise app.UsageError(
-          f"--gpu_parts=report: no {gpu_benchmark.stem_for(accelerator)}"
-          f"_<part>{'_quick' if _QUICK.value else ''}.json in "
-          f"--out={_OUT.value} to report on (measure a part first)")
+          f"--gpu_parts=report: no gpu_<part>{q}.json nor gpu_cpu_<part>"
+          f"{q}.json in --out={_OUT.value} to report on (measure a part "
+          "first)")
   if _READ_DATA.value is not None:
     if "dataset" not in what and "input" not in what:
       raise app.UsageError(f"--read_data={_READ_DATA.value}: only used by "
@@ -181,18 +182,22 @@ def main(argv):
           _READ_DATA.value, out, quick=quick),
       "batch": lambda: batch_benchmark.run_benchmark(
           out, quick=quick, log=logging.info),
-      "gpu": lambda: gpu_benchmark.run_benchmark(
-          out, quick=quick, log=logging.info,
-          parts=[p for p in _GPU_PARTS.value if p != "report"],
-          cpu_reference=_CPU_REFERENCE.value,
-          command="python -m experiments.benchmarks " + " ".join(
-              sys.argv[1:])),
+      "gpu": lambda: (
+          gpu_benchmark.report_all(out, quick=quick,
+                                   cpu_reference=_CPU_REFERENCE.value)
+          if _GPU_PARTS.value == ["report"] else
+          [gpu_benchmark.run_benchmark(
+              out, quick=quick, log=logging.info, parts=_GPU_PARTS.value,
+              cpu_reference=_CPU_REFERENCE.value,
+              command="python -m experiments.benchmarks " + " ".join(
+                  sys.argv[1:]))]),
   }
   for name in BENCHMARKS:
     if name in what:
       results = runs[name]()
-      print(results["markdown"])
-      print("Wrote " + ", ".join(results["files"]))
+      for r in results if isinstance(results, list) else [results]:
+        print(r["markdown"])
+        print("Wrote " + ", ".join(r["files"]))
 
 
 if __name__ == "__main__":

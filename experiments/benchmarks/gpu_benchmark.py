@@ -924,6 +924,30 @@ def run_benchmark(out_dir: str, *, parts: Sequence[str] = PARTS,
                       reference_path=cpu_reference if reference else None)
 
 
+def report_all(out_dir: str, *, quick: bool = False,
+               cpu_reference: str | None = DEFAULT_REFERENCE
+               ) -> list[dict[str, Any]]:
+  """Rebuilds the report of each role whose part files are in
+  ``out_dir`` (``--gpu_parts=report``): the accelerator's with the CPU
+  reference, the CPU reference's. Measures nothing, needs no device.
+
+  Raises:
+    FileNotFoundError: no part file of either role in ``out_dir``.
+  """
+  reports = []
+  for accelerator in (True, False):
+    if read_parts(out_dir, accelerator, quick):
+      reference = load_reference(cpu_reference) if accelerator else None
+      reports.append(write_report(
+          out_dir, accelerator, quick=quick, reference=reference,
+          reference_path=cpu_reference if reference else None))
+  if not reports:
+    raise FileNotFoundError(
+        f"{out_dir}: no gpu_<part>{'_quick' if quick else ''}.json nor "
+        f"gpu_cpu_<part>{'_quick' if quick else ''}.json to report on")
+  return reports
+
+
 # -------------------------------------------------------------- summary ---
 
 

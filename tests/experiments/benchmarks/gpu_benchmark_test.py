@@ -139,9 +139,8 @@ def test_accelerator_path_against_a_twin_and_the_reference(tmp_path):
                    r"[0-9.e+]+ \| [0-9.e-]+ \| [0-9.e+]+x \|",
                    acc["markdown"])
   # --gpu_parts=report: the report again from the part files alone.
-  again = gpu_benchmark.run_benchmark(out, parts=(), quick=True,
-                                      accelerator=True,
-                                      cpu_reference=reference, log=log)
+  (again,) = gpu_benchmark.report_all(out, quick=True,
+                                      cpu_reference=reference)
   assert again["markdown"] == acc["markdown"]
 
 

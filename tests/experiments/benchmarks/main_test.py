@@ -80,7 +80,8 @@ class FlagsTest(absltest.TestCase):
     empty = fixtures.tempdir(self)
     with flagsaver.flagsaver(what=["gpu"], gpu_parts=["report"], out=empty):
       with self.assertRaisesRegex(app.UsageError,
-                                  "--gpu_parts=report: .*no gpu_cpu_<part>"):
+                                  "--gpu_parts=report: no gpu_<part>.json "
+                                  "nor gpu_cpu_<part>.json"):
         benchmarks_main.main(["benchmarks"])
 
   def test_unexpected_arguments(self):
