@@ -184,6 +184,14 @@ def _json_default(v):
   raise TypeError(f"not JSON serialisable: {type(v)}")
 
 
+def write_json(path: str, content: Any) -> None:
+  """Writes ``content`` as indented JSON (numpy values as numbers) to
+  ``path``, atomically."""
+  mpm_io.write_text(path, json.dumps(content, indent=1,
+                                     default=_json_default) + "
+")
+
+
 def write_results(out_dir: str, name: str, quick: bool,
                   results: dict[str, Any], markdown: str) -> list[str]:
   """Writes ``<name>[_quick].json`` and ``.md`` to ``out_dir`` (created).

@@ -32,4 +32,12 @@ batch (``batch_benchmark``): particle-substeps per second of
 design (``design_benchmark``): the gradient of an objective w.r.t. an
 obstacle's x against the forward rollout, for MPM and GNS: time ratio and
 XLA memory.
+
+gpu (``gpu_benchmark``): every accelerator figure in one command (MPM alone
+and vmapped, the largest batch, the dataset; the paper GNS's rollout,
+Table 2; training steps/s; agreement with a CPU), each beside this
+project's CPU figure for the same code (the CPU reference, which the same
+command measures on a CPU). It writes one ``gpu_<part>.json`` per part and
+``gpu_benchmark.json`` / ``.md`` (``gpu_cpu_*`` on the CPU) instead of one
+pair. ``gpu.sh`` runs it on a bare accelerator machine.
 """

@@ -7,6 +7,8 @@
       --read_data=data/small
   python -m experiments.benchmarks --what=design --out=docs/benchmarks
   python -m experiments.benchmarks --what=batch --out=docs/benchmarks
+  python -m experiments.benchmarks --what=gpu --out=DIR \\
+      [--gpu_parts=mpm,gns,train] [--cpu_reference=FILE]
   python -m experiments.benchmarks --what=mpm,gns --quick ...   # smoke test
 
 ``--what`` (comma-separated; default mpm,gns) picks the benchmarks; each
@@ -15,9 +17,19 @@ with ``--quick``, tiny sizes that are not figures) and prints its tables.
 What each measures is in the package docstring (``__init__.py``). The gns
 benchmark needs the shared sand block window, which is not part of the
 repository: ``--sand_block_dir``.
+
+gpu (``gpu_benchmark``) measures on the first device: on an accelerator it
+writes ``gpu_<part>.json`` per part and ``gpu_benchmark.{json,md}``, with
+the CPU reference (``--cpu_reference``) beside every figure; on the CPU it
+measures that reference (``gpu_cpu_<part>.json``,
+``gpu_cpu_reference.{json,md}``). ``--gpu_parts=report`` measures nothing
+and rebuilds the report from the part files in ``--out``. On an
+accelerator machine run it through ``experiments/benchmarks/gpu.sh``
+(docs/performance.md).
 """
 
 import os
+import sys
 
 from absl import app
 from absl import flags
@@ -29,10 +41,13 @@ from experiments.benchmarks import dataset_benchmark
 from experiments.benchmarks import design_benchmark
 from experiments.benchmarks import gns_benchmark
 from experiments.benchmarks import gns_inputs
+from experiments.benchmarks import gpu_benchmark
 from experiments.benchmarks import input_benchmark
 from experiments.benchmarks import mpm_benchmark
 
-BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch")
+FLAGS = flags.FLAGS
+BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch", "gpu")
+GPU_PARTS = gpu_benchmark.PARTS + ("report",)
 
 _OUT = flags.DEFINE_string("out", "docs/benchmarks",
                            "Directory for the JSON and Markdown results.")
@@ -52,6 +67,15 @@ _SAND_BLOCK_DIR = flags.DEFINE_string(
     "gns (required): directory of the shared sand block window, "
     f"{gns_inputs.SAND_BLOCK_NPZ} and {gns_inputs.SAND_BLOCK_METADATA} "
     f"(and the {gns_inputs.SAND_BLOCK_README} quoting the peers' times).")
+_GPU_PARTS = flags.DEFINE_list(
+    "gpu_parts", list(gpu_benchmark.PARTS),
+    "gpu: parts to measure, a comma-separated subset of "
+    f"{', '.join(gpu_benchmark.PARTS)}; or report alone: measure nothing, "
+    "rebuild the report from the part files in --out.")
+_CPU_REFERENCE = flags.DEFINE_string(
+    "cpu_reference", gpu_benchmark.DEFAULT_REFERENCE,
+    "gpu, on an accelerator: the CPU reference report whose figures stand "
+    "beside this device's (measured by --what=gpu on the CPU).")
 _READ_DATA = flags.DEFINE_string(
     "read_data", None, "dataset, input: a dataset directory to time reading "
     "on (input: required, a dataset of the small config).")
@@ -67,6 +91,20 @@ def _check_what(value: list[str]) -> bool:
 
 
 flags.register_validator("what", _check_what)
+
+
+def _check_gpu_parts(value: list[str]) -> bool:
+  unknown = [v for v in value if v not in GPU_PARTS]
+  if not value or unknown or ("report" in value and len(value) > 1):
+    raise flags.ValidationError(
+        f"--gpu_parts={','.join(value)}: "
+        + (f"unknown {unknown}" if unknown else "empty" if not value else
+           "report goes alone") + "; allowed: a comma-separated subset of "
+        f"{list(gpu_benchmark.PARTS)}, or report alone")
+  return True
+
+
+flags.register_validator("gpu_parts", _check_gpu_parts)
 
 
 def check_inputs(what: list[str]) -> None:
@@ -90,6 +128,25 @@ def check_inputs(what: list[str]) -> None:
   if "input" in what and _READ_DATA.value is None:
     raise app.UsageError("--read_data is required with --what=input: a "
                          "dataset directory of the small config")
+  if not FLAGS["gpu_parts"].using_default_value and "gpu" not in what:
+    raise app.UsageError(f"--gpu_parts={','.join(_GPU_PARTS.value)}: only "
+                         f"used by --what=gpu (got --what={','.join(what)})")
+  if not FLAGS["cpu_reference"].using_default_value:
+    if "gpu" not in what:
+      raise app.UsageError(f"--cpu_reference={_CPU_REFERENCE.value}: only "
+                           "used by --what=gpu (got "
+                           f"--what={','.join(what)})")
+    if not os.path.isfile(_CPU_REFERENCE.value):
+      raise app.UsageError(f"--cpu_reference={_CPU_REFERENCE.value}: no such"
+                           " file (the report of --what=gpu run on the CPU)")
+  if "gpu" in what and _GPU_PARTS.value == ["report"]:
+    if not any(gpu_benchmark.read_parts(_OUT.value, role, _QUICK.value)
+               for role in (True, False)):
+      q = "_quick" if _QUICK.value else ""
+      raise app.UsageError(
+          f"--gpu_parts=report: no gpu_<part>{q}.json nor gpu_cpu_<part>"
+          f"{q}.json in --out={_OUT.value} to report on (measure a part "
+          "first)")
   if _READ_DATA.value is not None:
     if "dataset" not in what and "input" not in what:
       raise app.UsageError(f"--read_data={_READ_DATA.value}: only used by "
@@ -125,12 +182,22 @@ def main(argv):
           _READ_DATA.value, out, quick=quick),
       "batch": lambda: batch_benchmark.run_benchmark(
           out, quick=quick, log=logging.info),
+      "gpu": lambda: (
+          gpu_benchmark.report_all(out, quick=quick,
+                                   cpu_reference=_CPU_REFERENCE.value)
+          if _GPU_PARTS.value == ["report"] else
+          [gpu_benchmark.run_benchmark(
+              out, quick=quick, log=logging.info, parts=_GPU_PARTS.value,
+              cpu_reference=_CPU_REFERENCE.value,
+              command="python -m experiments.benchmarks " + " ".join(
+                  sys.argv[1:]))]),
   }
   for name in BENCHMARKS:
     if name in what:
       results = runs[name]()
-      print(results["markdown"])
-      print("Wrote " + ", ".join(results["files"]))
+      for r in results if isinstance(results, list) else [results]:
+        print(r["markdown"])
+        print("Wrote " + ", ".join(r["files"]))
 
 
 if __name__ == "__main__":

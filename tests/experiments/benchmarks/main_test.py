@@ -57,6 +57,33 @@ class FlagsTest(absltest.TestCase):
                                   "--read_data is required with --what=input"):
         benchmarks_main.main(["benchmarks"])
 
+  def test_gpu_parts_flag_is_checked(self):
+    with flagsaver.flagsaver():
+      for bad, why in ((["mpm", "lbm"], r"unknown \['lbm'\]"),
+                       (["report", "mpm"], "report goes alone")):
+        with self.assertRaisesRegex(flags.IllegalFlagValueError,
+                                    f"--gpu_parts=.*{why}.*subset of"):
+          FLAGS.gpu_parts = bad
+
+  def test_gpu_flags_need_what_gpu_and_an_existing_reference(self):
+    missing = os.path.join(fixtures.tempdir(self), "none.json")
+    with flagsaver.flagsaver(what=["mpm"], gpu_parts=["gns"]):
+      with self.assertRaisesRegex(app.UsageError,
+                                  "--gpu_parts=gns: only used by --what=gpu"):
+        benchmarks_main.main(["benchmarks"])
+    with flagsaver.flagsaver(what=["gpu"], cpu_reference=missing):
+      with self.assertRaisesRegex(app.UsageError,
+                                  f"--cpu_reference={missing}: no such file"):
+        benchmarks_main.main(["benchmarks"])
+
+  def test_gpu_report_alone_needs_part_files(self):
+    empty = fixtures.tempdir(self)
+    with flagsaver.flagsaver(what=["gpu"], gpu_parts=["report"], out=empty):
+      with self.assertRaisesRegex(app.UsageError,
+                                  "--gpu_parts=report: no gpu_<part>.json "
+                                  "nor gpu_cpu_<part>.json"):
+        benchmarks_main.main(["benchmarks"])
+
   def test_unexpected_arguments(self):
     with self.assertRaisesRegex(app.UsageError, "unexpected arguments"):
       benchmarks_main.main(["benchmarks", "mpm"])

@@ -1,0 +1,1244 @@
+"""Every accelerator figure in one command: MPM, GNS, training, agreement.
+
+  python -m experiments.benchmarks --what=gpu --out=DIR \\
+      [--gpu_parts=mpm,gns,train] [--cpu_reference=FILE]
+  bash experiments/benchmarks/gpu.sh mpm          # on an accelerator machine
+  bash experiments/benchmarks/gpu.sh gns,train    # (docs/performance.md)
+
+One library call per part, :func:`run_part`, measures on this process's
+first device and writes ``<stem>_<part>.json``; :func:`write_report`
+assembles the parts found in the directory with the CPU reference into
+``<stem>_benchmark.{json,md}`` (``run_benchmark`` does both). On an
+accelerator the stem is ``gpu``; on the CPU it is ``gpu_cpu`` and the report
+``gpu_cpu_reference.{json,md}``: the same programs at sizes one CPU core runs
+in minutes, committed so that every accelerator figure has this project's
+CPU figure beside it (``--cpu_reference``; the accelerator machine's own CPU
+is another CPU). The parts:
+
+mpm: the paper scene (1000 particles, one semicircle, 600 frames) one at a
+  time (``mpm.simulate``'s clock) and B copies of it vmapped
+  (``jax.vmap(mpm.solver.rollout)``, chunks of 50 frames copied to the host
+  as ``mpm.simulate_setups`` does), seconds per trajectory and
+  particle-substeps per second; the batch ``mpm.simulation.batch_size_for``
+  picks from the device's memory statistics, run for one chunk; a batch of
+  the paper dataset's own scenes (``mpm.dataset.plan``, 700-1500
+  particles) timed and extrapolated to its 1,100 trajectories; the study of
+  ``experiments.tradeoff`` (the paper scene at several particle spacings)
+  per trajectory; and the agreement below.
+gns: the paper model (``configs/paper.py``: latent 128, 10 message-passing
+  steps, boundary particles as nodes) rolling out the paper trajectory
+  (594 learned steps after C = 6 input frames) alone and as B copies in one
+  vmapped rollout: seconds per simulation, the paper's Table 2 measure. The
+  model has its initial parameters with the decoder's last layer set to
+  zero, so it predicts the data's mean acceleration and the sand stays
+  close to its start: the graph keeps the dense heap's edges (about the
+  most a trajectory has) and every step does a trained model's work, whose
+  cost does not depend on the parameters' values. Also the shipped small
+  model (``experiments/pretrained/small``) on its own scene, the learned row
+  of the speed/accuracy study.
+train: steps per second of ``train.train_and_evaluate`` with the paper
+  config (batch 2, host batches, graphs built per step) on a dataset of
+  paper trajectories generated first, evaluation off; the median of
+  ``log_every`` intervals after a warm-up, projected to 1.5 M and 2 M steps
+  beside the paper's 81.5 h and 134 h on a V100.
+
+Agreement: the paper scene after ``AGREEMENT_EARLY_FRAME`` frames and after
+599, and the small model's rollout after a few steps and at its end, on this
+device against the same runs on a CPU: the accelerator machine's own CPU
+(a child process with ``JAX_PLATFORMS=cpu``, same jax) and this project's
+CPU reference (another jax, another CPU; its start window is used for the
+learned rollout). Tolerances (module constants) and why:
+
+* early, per particle: at most ``EARLY_TOLERANCE_M`` = 1e-5 m (a tenth of a
+  percent of a cell), before rounding differences have grown; a 1-ulp shift
+  of the start moves particles by 4e-7 m there.
+* final, the MPM: RMS over particles at most 1 mm, any particle at most 1 cm
+  (one grid cell), and the 1% front and the centre of mass within 1 mm. A
+  1-ulp shift of every start position on this CPU moves the final particles
+  by 4e-5 m RMS and 2e-4 m at most (measured in the reference, the
+  ``envelope``); an accelerator rounds differently in every one of 8,400
+  substeps (scatter order, fused multiply-adds, its own log and sqrt), so
+  tens of times that are rounding; a difference in the physics moves sand
+  by cells.
+* final, the learned rollout: the 1% front and the centre of mass within
+  1 mm. Its particles are not compared at the end: the same 1-ulp shift of
+  its start moves single particles by up to 1.4 cm (RMS 3 mm) after 194
+  steps on this CPU, while its front and centre move by under 0.1 mm.
+  The accelerator's default float32 matmul precision may be TF32; the
+  rollout is also run at ``highest`` and both are reported.
+
+Timing follows ``timing``'s rules: compilation apart (``compile_s``), a
+warm-up call, ``jax.block_until_ready`` (or the library's own synchronised
+clock), medians of repeats, calls compared with each other interleaved.
+Where a CPU size runs fewer frames or steps than the trajectory, the
+seconds per trajectory are extrapolated per substep or step and marked so.
+"""
+
+import base64
+import csv
+import dataclasses
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from typing import Any, Callable, Sequence
+
+from absl import logging
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from experiments import timing
+from experiments.benchmarks import batch_benchmark
+from experiments.benchmarks import gns_programs
+from experiments.benchmarks import scenes
+from experiments.studies import settings
+from experiments.studies import tradeoff as tradeoff_study
+from gnsjax import metrics
+from gnsjax import rollout as rollout_lib
+from gnsjax import run as run_lib
+from gnsjax import simulator
+from gnsjax import train
+import mpm
+from mpm import dataset as mpm_dataset
+from mpm import io as mpm_io
+from mpm import simulation
+
+PARTS = ("mpm", "gns", "train")
+DEFAULT_REFERENCE = "docs/benchmarks/gpu_cpu_reference.json"
+PRETRAINED = settings.PRETRAINED
+
+# The paper (Table 2, section III): a V100 for the GNS, its CPU for the MPM.
+PAPER_GNS_S = (0.03, 0.05)
+PAPER_MPM_S = (17.0, 23.0)
+PAPER_TRAINING_H = {1_500_000: 81.5, 2_000_000: 134.0}
+PAPER_DATASET = 1_100  # trajectories (1000 training, 100 test)
+
+# The issue's targets.
+TARGET_PARTICLE_SUBSTEPS_PER_S = batch_benchmark.TARGET_PARTICLE_SUBSTEPS_PER_S
+TARGET_GNS_CHEAPER_THAN_CPU_MPM = 10.0
+TARGET_TRAINING_H = 24.0  # for 1.5 M steps
+
+# Agreement (see the module docstring for why these).
+AGREEMENT_EARLY_FRAME = 20
+EARLY_TOLERANCE_M = 1e-5
+FINAL_RMS_TOLERANCE_M = 1e-3
+FINAL_MAX_TOLERANCE_M = 1e-2
+FINAL_MEASURE_TOLERANCE_M = 1e-3
+GNS_EARLY_STEP = 5
+MEASURES = ("front_1pct_m", "centre_x_m", "centre_y_m")
+
+
+@dataclasses.dataclass(frozen=True)
+class Sizes:
+  """What to measure, and how much.
+
+  Attributes:
+    frames: frames of the paper trajectory (600).
+    repeats: timed repeats of each one-at-a-time figure.
+    batch_sizes: copies of the paper scene per vmapped call.
+    batch_frames: frames each vmapped call runs (the trajectory's on an
+      accelerator; fewer on the CPU, extrapolated).
+    batch_repeats: timed repeats of each batch.
+    chunk_frames: frames per compiled call (``mpm.simulate``'s 50).
+    max_batch: run the batch ``batch_size_for`` picks (capped here).
+    dataset_batch: dataset scenes per timed batch; dataset_frames: their
+      frames (extrapolated to 600).
+    spacings: particle spacings (m) of the speed/accuracy study's MPM rows.
+    gns_config: config of the timed model (``experiments/configs``).
+    gns_steps: learned steps per timed rollout (0: the whole trajectory).
+    gns_batch_sizes: copies per vmapped rollout (1: ``rollout.rollout``).
+    gns_repeats: timed repeats of each rollout.
+    small_frames: frames of the small model's scene (its agreement and
+      timing).
+    train_config: config of the timed training.
+    train_trajectories: training trajectories generated for it, of
+      ``train_frames`` frames.
+    train_warmup: steps before the timed ones; train_steps: timed steps,
+      logged every ``train_log_every``.
+  """
+  frames: int = 600
+  repeats: int = 3
+  batch_sizes: tuple[int, ...] = (1, 8, 64, 256)
+  batch_frames: int = 600
+  batch_repeats: int = 2
+  chunk_frames: int = 50
+  max_batch: int = 4096
+  dataset_batch: int = 64
+  dataset_frames: int = 600
+  spacings: tuple[float, ...] = (0.02, 0.01, 0.007, 0.005, 0.0035, 0.0025)
+  gns_config: str = "paper"
+  gns_steps: int = 0
+  gns_batch_sizes: tuple[int, ...] = (1, 8, 32)
+  gns_repeats: int = 2
+  small_frames: int = 600
+  train_config: str = "paper"
+  train_trajectories: int = 2
+  train_frames: int = 600
+  train_warmup: int = 100
+  train_steps: int = 400
+  train_log_every: int = 50
+
+
+# On an accelerator: whole trajectories everywhere.
+FULL = Sizes()
+# This project's CPU (one core, minutes): the same programs, short runs.
+REFERENCE = Sizes(batch_frames=5, batch_repeats=2, chunk_frames=5,
+                  max_batch=8, dataset_batch=8, dataset_frames=11,
+                  gns_steps=5, gns_batch_sizes=(1, 8), gns_repeats=2,
+                  train_trajectories=1, train_frames=100, train_warmup=2,
+                  train_steps=6, train_log_every=2)
+# Tiny sizes that exercise every measurement in seconds (smoke tests).
+# Few distinct programs: the paper scene at its own spacing is the study's
+# row, the largest batch reuses the x2 program, the test model's scene is
+# the small model's (19 frames: 16 to start from, 1 learned step).
+QUICK = Sizes(frames=19, repeats=1, batch_sizes=(1, 2), batch_frames=3,
+              batch_repeats=1, chunk_frames=2, max_batch=2, dataset_batch=2,
+              dataset_frames=3, spacings=(0.005,), gns_config="test",
+              gns_steps=2, gns_batch_sizes=(1, 2), gns_repeats=1,
+              small_frames=19, train_config="test", train_trajectories=1,
+              train_frames=10, train_warmup=1, train_steps=2,
+              train_log_every=1)
+
+
+def sizes_for(accelerator: bool, quick: bool) -> Sizes:
+  """QUICK, else FULL on an accelerator and REFERENCE on the CPU."""
+  if quick:
+    return QUICK
+  return FULL if accelerator else REFERENCE
+
+
+def stem_for(accelerator: bool) -> str:
+  """``gpu`` on an accelerator, ``gpu_cpu`` on the CPU (the reference)."""
+  return "gpu" if accelerator else "gpu_cpu"
+
+
+def report_name(accelerator: bool) -> str:
+  return "gpu_benchmark" if accelerator else "gpu_cpu_reference"
+
+
+# ------------------------------------------------------------- helpers ---
+
+
+def encode_positions(x: np.ndarray) -> dict[str, Any]:
+  """float32 positions as JSON: shape and base64 of the bytes."""
+  x = np.ascontiguousarray(x, np.float32)
+  return {"shape": list(x.shape),
+          "float32_base64": base64.b64encode(x.tobytes()).decode("ascii")}
+
+
+def decode_positions(d: dict[str, Any]) -> np.ndarray:
+  return np.frombuffer(base64.b64decode(d["float32_base64"]),
+                       np.float32).reshape(d["shape"])
+
+
+def paper_scene(num_frames: int) -> mpm.Scene:
+  return mpm.Scene.from_dict({**scenes.PAPER_SCENE, "num_frames": num_frames})
+
+
+def measures(x: np.ndarray) -> dict[str, float]:
+  """Where the sand of one frame [N, 2] (m) is: the 1% front (it flows
+  toward smaller x, ``metrics.runout``) and the centre of mass."""
+  x = np.asarray(x, np.float64)
+  return {"front_1pct_m": float(metrics.runout(x)),
+          "centre_x_m": float(np.mean(x[:, 0])),
+          "centre_y_m": float(np.mean(x[:, 1]))}
+
+
+def difference(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
+  """Per-particle distances of two frames [N, 2] (m) and the measures'."""
+  d = np.linalg.norm(np.asarray(a, np.float64) - np.asarray(b, np.float64),
+                     axis=-1)
+  ma, mb = measures(a), measures(b)
+  return {"max_m": float(d.max()), "rms_m": float(np.sqrt(np.mean(d**2))),
+          "median_m": float(np.median(d)),
+          **{k: abs(ma[k] - mb[k]) for k in MEASURES}}
+
+
+def one_ulp(window: np.ndarray) -> np.ndarray:
+  """Positions [..., 2] with every x moved up by one float32 ulp."""
+  w = np.array(window, np.float32)
+  w[..., 0] = np.nextafter(w[..., 0], np.float32(np.inf))
+  return w
+
+
+def _fmt(v, spec=".3g", none="-"):
+  return none if v is None else format(v, spec)
+
+
+def _ratio(a, b):
+  return None if a is None or b is None or b == 0 else a / b
+
+
+def _is_out_of_memory(e: Exception) -> bool:
+  return "RESOURCE_EXHAUSTED" in str(e) or "out of memory" in str(e).lower()
+
+
+# ------------------------------------------------------------------ mpm ---
+
+_vmapped = jax.jit(jax.vmap(mpm.solver.rollout,
+                            in_axes=(0, 0, 0, None, None, None)),
+                   static_argnums=(3, 4, 5))
+
+
+# Compiled vmapped programs by (copies, frames per call, setup's shapes).
+_programs: dict = {}
+
+
+def _copies(setup: mpm.Setup, b: int):
+  """(state, params, field) of ``b`` copies of ``setup``, batch axis first."""
+  stack = lambda a: jnp.broadcast_to(a, (b,) + a.shape).copy()
+  return tuple(jax.tree.map(stack, getattr(setup, k))
+               for k in ("state", "params", "field"))
+
+
+def time_vmapped(setup: mpm.Setup, b: int, frames: int, chunk: int,
+                 repeats: int) -> dict[str, Any]:
+  """``b`` copies of ``setup`` as one vmapped program for ``frames``.
+
+  Compiled once (``compile_s``); each call runs the chunks of ``chunk``
+  frames from the initial state, copying each chunk's positions to the
+  host as ``mpm.simulate_setups`` does; ``repeats`` calls after a warm-up.
+
+  Returns:
+    ``timing.time_calls``' summary (seconds per call) with ``compile_s``,
+    ``substeps_run`` (per scene) and ``finite`` (every frame finite).
+  """
+  n_chunks, per = simulation.chunking(frames, chunk)
+  args = _copies(setup, b)
+  key = (b, per, setup.spec, setup.n_substeps, setup.state.x.shape,
+         setup.field.index.shape)
+  if key not in _programs:
+    _programs[key] = timing.compile_program(_vmapped, *args, setup.spec, per,
+                                            setup.n_substeps)
+  program = _programs[key]
+  finite = []
+
+  def run():
+    state, params, field = args
+    for _ in range(n_chunks):
+      state, x, _, ok = program(state, params, field)
+      np.asarray(x)  # to the host, as the library does
+    finite.append(bool(np.all(np.asarray(ok))))
+    return state
+
+  seconds = timing.time_calls({"batch": run}, repeats)["batch"]
+  return {**seconds, "compile_s": program.compile_s,
+          "substeps_run": n_chunks * per * setup.n_substeps,
+          "finite": all(finite)}
+
+
+def _rate_row(seconds: float, scenes_run: int, particles: int,
+              substeps_run: int, trajectory_substeps: int) -> dict[str, Any]:
+  """Seconds per trajectory (per scene, scaled to a whole trajectory's
+  substeps) and particle-substeps per second of a timed call."""
+  return {"s_per_trajectory": seconds / scenes_run * trajectory_substeps
+                              / substeps_run,
+          "particle_substeps_per_s": scenes_run * particles * substeps_run
+                                     / seconds,
+          "extrapolated": substeps_run < trajectory_substeps}
+
+
+def mpm_positions(scene: mpm.Scene, frames: Sequence[int],
+                  perturb: bool = False) -> np.ndarray:
+  """The scene's sand at ``frames`` [len(frames), N, 2] on this device
+  (from positions one float32 ulp to the right if ``perturb``)."""
+  s = mpm.setup(scene)
+  if perturb:
+    x0 = np.asarray(s.state.x)[:s.n_particles]
+    s = mpm.setup(scene, one_ulp(x0))
+  return mpm.simulate_setups([s])[0].positions[list(frames)]
+
+
+def agreement_frames(sizes: Sizes) -> list[int]:
+  return [min(AGREEMENT_EARLY_FRAME, sizes.frames - 1), sizes.frames - 1]
+
+
+def measure_mpm(sizes: Sizes, log: Callable[[str], None]) -> dict[str, Any]:
+  """The mpm part: one at a time, vmapped, the largest batch, the dataset,
+  the spacings; the positions compared for agreement."""
+  scene = paper_scene(sizes.frames)
+  setup = mpm.setup(scene)
+  n, nsub = setup.n_particles, setup.n_substeps
+  trajectory_substeps = (sizes.frames - 1) * nsub
+  out: dict[str, Any] = {"scene": {
+      "name": scene.name, "n_particles": n,
+      "n_particles_padded": int(setup.state.x.shape[0]),
+      "frames": sizes.frames, "n_substeps_per_frame": nsub,
+      "grid_shape": list(setup.spec.shape),
+      "n_boundary_nodes": int(setup.field.index.shape[0])}}
+
+  first, walls = timing.self_timed(lambda: mpm.simulate(scene), sizes.repeats,
+                                   lambda r: r.wall_time_s)
+  n_chunks, per = simulation.chunking(sizes.frames, 50)
+  run = n_chunks * per * nsub
+  out["single"] = {**walls, "compile_s": first.compile_time_s,
+                   "substeps_run": run,
+                   **_rate_row(walls["median_s"], 1, n, run, run)}
+  out["single"]["extrapolated"] = False
+  log(f"paper scene, one at a time (mpm.simulate): "
+      f"{walls['median_s']:.3f} s per {sizes.frames}-frame trajectory "
+      f"({out['single']['particle_substeps_per_s']:.3g} particle-substeps/s;"
+      f" compile {first.compile_time_s:.1f} s excluded)")
+
+  out["vmapped"] = []
+  for b in sizes.batch_sizes:
+    t = time_vmapped(setup, b, min(sizes.batch_frames, sizes.frames),
+                     sizes.chunk_frames, sizes.batch_repeats)
+    row = {"batch": b, **t, **_rate_row(t["median_s"], b, n,
+                                        t["substeps_run"],
+                                        trajectory_substeps)}
+    out["vmapped"].append(row)
+    log(f"vmapped x{b}: {row['median_s']:.3f} s per call, "
+        f"{row['s_per_trajectory']:.4f} s per trajectory"
+        + (" (extrapolated)" if row["extrapolated"] else "")
+        + f", {row['particle_substeps_per_s']:.3g} particle-substeps/s")
+
+  out["largest_batch"] = measure_largest_batch(scene, setup, sizes, log)
+  out["dataset"] = measure_dataset(sizes, log)
+  out["spacings"] = measure_spacings(sizes, log)
+  frames = agreement_frames(sizes)
+  out["agreement"] = {"frames": frames,
+                      "positions": encode_positions(first.positions[frames])}
+  return out
+
+
+def measure_largest_batch(scene: mpm.Scene, setup: mpm.Setup, sizes: Sizes,
+                          log: Callable[[str], None]) -> dict[str, Any]:
+  """The batch ``batch_size_for`` picks (from ``memory_stats()``; its
+  fallback on the CPU), capped at ``sizes.max_batch``, run for one chunk;
+  halved on running out of memory."""
+  chunk = min(sizes.chunk_frames, sizes.frames - 1) + 1
+  sizing = simulation.batch_size_for(scene, chunk_frames=chunk - 1)
+  out = {"sizing": dataclasses.asdict(sizing), "cap": sizes.max_batch,
+         "frames": chunk, "failed": []}
+  b = min(sizing.batch, sizes.max_batch)
+  while b >= 1:
+    try:
+      t = time_vmapped(setup, b, chunk, chunk, 1)
+    except Exception as e:  # pylint: disable=broad-except
+      if not _is_out_of_memory(e):
+        raise
+      out["failed"].append({"batch": b, "error": str(e).splitlines()[0]})
+      log(f"largest batch: {b} scenes ran out of memory; halving")
+      b //= 2
+      continue
+    out.update(batch=b, **t, **_rate_row(
+        t["median_s"], b, setup.n_particles, t["substeps_run"],
+        (sizes.frames - 1) * setup.n_substeps))
+    log(f"largest batch ({sizing.source}): {b} scenes, "
+        f"{out['particle_substeps_per_s']:.3g} particle-substeps/s over "
+        f"{chunk - 1} frames; per scene "
+        f"{sizing.per_scene_bytes / 2**20:.2f} MiB")
+    return out
+  return out
+
+
+def measure_dataset(sizes: Sizes, log: Callable[[str], None]
+                    ) -> dict[str, Any]:
+  """A batch of the paper dataset's first training scenes through
+  ``mpm.simulate_batch``, extrapolated to its 1,100 trajectories."""
+  spec = mpm_dataset.DatasetSpec(num_train=sizes.dataset_batch, num_test=1,
+                                 num_frames=sizes.dataset_frames)
+  planned = [p.scene for p in mpm_dataset.plan(spec)
+             if p.split == "train"][:sizes.dataset_batch]
+  first, walls = timing.self_timed(
+      lambda: mpm.simulate_batch(planned, chunk_frames=sizes.chunk_frames),
+      1, lambda r: r[0].wall_time_s * len(r))
+  n_chunks, per = simulation.chunking(sizes.dataset_frames,
+                                      sizes.chunk_frames)
+  steps_run = n_chunks * per
+  batch_s = walls["median_s"] * (600 - 1) / steps_run
+  total_h = batch_s * math.ceil(PAPER_DATASET / len(planned)) / 3600
+  out = {"batch": len(planned), "frames_run": sizes.dataset_frames,
+         "particles": [s.granular.num_particles for s in planned],
+         "n_substeps_per_frame": first[0].n_substeps,
+         "batch_s": walls["median_s"], "compile_s": first[0].compile_time_s,
+         "batch_s_600_frames": batch_s, "dataset_h": total_h,
+         "extrapolated_frames": steps_run < 599}
+  log(f"dataset: {len(planned)} of its scenes in one batch, "
+      f"{walls['median_s']:.2f} s for {sizes.dataset_frames} frames -> "
+      f"{PAPER_DATASET} trajectories of 600 frames in {total_h:.3g} h "
+      "(simulation only, extrapolated)")
+  return out
+
+
+def measure_spacings(sizes: Sizes, log: Callable[[str], None]) -> list[dict]:
+  """Seconds per trajectory of the paper scene at each spacing of the
+  speed/accuracy study (``experiments.studies.tradeoff.at_spacing``)."""
+  rows = []
+  for spacing in sizes.spacings:
+    scene = tradeoff_study.at_spacing(paper_scene(sizes.frames), spacing)
+    first, walls = timing.self_timed(lambda s=scene: mpm.simulate(s),
+                                     max(1, sizes.repeats - 1),
+                                     lambda r: r.wall_time_s)
+    rows.append({"spacing_m": spacing,
+                 "particles": scene.granular.num_particles,
+                 "n_substeps_per_frame": first.n_substeps,
+                 "s_per_trajectory": walls["median_s"], **walls,
+                 "compile_s": first.compile_time_s})
+    log(f"spacing {spacing * 1000:g} mm ({scene.granular.num_particles} "
+        f"particles): {walls['median_s']:.3f} s per trajectory")
+  return rows
+
+
+# ------------------------------------------------------------------ gns ---
+
+
+def still_decoder(params, hidden_layers: int):
+  """``params`` with the decoder's last layer (kernel and bias) zero."""
+  last = f"dense_{hidden_layers}"
+
+  def zero(path, x):
+    keys = [getattr(k, "key", None) for k in path]
+    return jnp.zeros_like(x) if "decoder" in keys and last in keys else x
+  return jax.tree_util.tree_map_with_path(zero, params)
+
+
+def paper_problem(config, positions: np.ndarray,
+                  scene: mpm.Scene) -> run_lib.Problem:
+  """The problem of a config on one trajectory [T, N, 2]: its finite
+  differences as statistics, the scene's domain, the dataset's radius."""
+  fd = mpm_io.finite_difference_stats([positions],
+                                      config.train.frame_stride)
+  return run_lib.problem_from_dict(config, {
+      **{k: np.asarray(v).tolist() for k, v in fd.items()},
+      "bounds": [[0.0, scene.domain.width], [0.0, scene.domain.height]],
+      "radius": float(config.model.connectivity_radius or
+                      config.dataset.connectivity_radius),
+      "noise_std": 0.0})
+
+
+def measure_gns(sizes: Sizes, log: Callable[[str], None],
+                twin: Callable[[str], dict] | None,
+                reference: dict | None) -> dict[str, Any]:
+  """The gns part: rollouts of the paper trajectory alone and batched, the
+  small model on its scene, and the agreement of its rollout."""
+  config = gns_programs.load_config(sizes.gns_config)
+  # The paper scene at the config's dataset spacing (the paper's: itself).
+  scene = tradeoff_study.at_spacing(paper_scene(sizes.frames),
+                            float(config.dataset.spacing))
+  result = mpm.simulate(scene)
+  problem = paper_problem(config, result.positions, scene)
+  model = run_lib.create_model(config.model)
+  params = still_decoder(gns_programs.init_params(model),
+                         config.model.hidden_layers)
+  c, k = problem.input_frames, problem.frame_stride
+  start = rollout_lib.trajectory_nodes(
+      mpm_io.Trajectory.from_result(result), c, k,
+      problem.boundary_particles, problem.sdf_spacing)
+  full = len(rollout_lib.predicted_frame_indices(sizes.frames, c, k))
+  steps = min(sizes.gns_steps or full, full)
+  chunk = min(50, steps)
+  predictor = simulator.ModelPredictor(model)
+  calls = {}
+  for b in sizes.gns_batch_sizes:
+    if b == 1:
+      calls[b] = lambda: rollout_lib.rollout(
+          predictor, params, start, steps, problem.context, problem.spec,
+          chunk=chunk)
+    else:
+      calls[b] = lambda b=b: rollout_lib.rollout_batch(
+          predictor, params, [start] * b, steps, problem.context,
+          problem.spec, chunk=chunk)
+  times = timing.time_calls({str(b): f for b, f in calls.items()},
+                            sizes.gns_repeats)
+  out: dict[str, Any] = {
+      "model": {"config": sizes.gns_config,
+                "latent_size": config.model.latent_size,
+                "num_message_passing_steps":
+                    config.model.num_message_passing_steps,
+                "boundary_particles": problem.boundary_particles,
+                "parameters": "initial, decoder's last layer zero"},
+      "scene": {"name": scene.name, "n_sand": int(result.positions.shape[1]),
+                "n_nodes": int(start.window.shape[1]),
+                "frames": sizes.frames, "learned_steps": full,
+                "steps_run": steps, "radius_m": problem.radius},
+      "rollouts": []}
+  for b in sizes.gns_batch_sizes:
+    t = times[str(b)]
+    row = {"batch": b, **t,
+           "s_per_simulation": t["median_s"] / b * full / steps,
+           "steps_per_s": steps / t["median_s"],
+           "extrapolated": steps < full,
+           "compile_and_warmup_s": t["warmup_s"]}
+    out["rollouts"].append(row)
+    log(f"{sizes.gns_config} model rollout x{b}: {t['median_s']:.3f} s for "
+        f"{steps} steps -> {row['s_per_simulation']:.4f} s per simulation"
+        + (" (extrapolated)" if row["extrapolated"] else ""))
+  out["small_model"] = measure_small_model(sizes, log, twin, reference)
+  return out
+
+
+def small_model_start(frames: int):
+  """The shipped small model, its scene (the paper scene at its dataset's
+  spacing, 10 mm), that scene's start and the learned steps to 600."""
+  run = run_lib.load_run(PRETRAINED)
+  p = run.problem
+  spacing = float(run.config.dataset.spacing)
+  scene = tradeoff_study.at_spacing(paper_scene(frames), spacing)
+  result = mpm.simulate(scene)
+  start = rollout_lib.trajectory_nodes(
+      mpm_io.Trajectory.from_result(result), p.input_frames, p.frame_stride,
+      p.boundary_particles, p.sdf_spacing)
+  steps = len(rollout_lib.predicted_frame_indices(frames, p.input_frames,
+                                                  p.frame_stride))
+  return run, scene, start, steps
+
+
+def small_rollout(run, start, steps: int, window: np.ndarray | None = None
+                  ) -> np.ndarray:
+  """Sand positions [T, N, 2] of the small model's rollout (from
+  ``window`` in place of the start's, if given)."""
+  if window is not None:
+    start = start._replace(window=np.asarray(window, np.float32))
+  out = rollout_lib.rollout(simulator.ModelPredictor(run.model), run.params,
+                            start, steps, run.problem.context,
+                            run.problem.spec)
+  return out.positions[:, np.asarray(start.moving)]
+
+
+def gns_agreement_steps(steps: int) -> list[int]:
+  return [min(GNS_EARLY_STEP, steps) - 1, steps - 1]
+
+
+def measure_small_model(sizes: Sizes, log: Callable[[str], None],
+                        twin: Callable[[str], dict] | None,
+                        reference: dict | None) -> dict[str, Any]:
+  """The small model's rollout timed on its scene, and compared with the
+  CPU twin's (same start window) and the CPU reference's (its window)."""
+  run, scene, start, steps = small_model_start(sizes.small_frames)
+  at = gns_agreement_steps(steps)
+  timed = timing.time_calls({"small": lambda: small_rollout(run, start,
+                                                            steps)},
+                            sizes.repeats)["small"]
+  out = {"particles": scene.granular.num_particles, "steps": steps,
+         "frame_stride": run.problem.frame_stride,
+         "s_per_simulation": timed["median_s"], **timed,
+         "agreement": {"steps": at,
+                       "window": encode_positions(start.window),
+                       "positions": encode_positions(
+                           small_rollout(run, start, steps)[at])}}
+  log(f"small model on its scene ({out['particles']} particles, {steps} "
+      f"steps): {timed['median_s']:.3f} s per simulation")
+  if twin is not None:
+    cpu = twin("gns")
+    w = decode_positions(cpu["window"])
+    runs = {"default": small_rollout(run, start, steps, w)}
+    with jax.default_matmul_precision("highest"):
+      runs["highest"] = small_rollout(run, start, steps, w)
+    out["agreement"]["twin"] = {
+        "envelope": compare(decode_positions(cpu["positions"]),
+                            decode_positions(cpu["perturbed"]), "gns"),
+        **{prec: compare(x[at], decode_positions(cpu["positions"]), "gns")
+           for prec, x in runs.items()}}
+  ref = _reference_part(reference, "gns")
+  if ref is not None:
+    r = ref["small_model"]["agreement"]
+    if r["steps"] == at:
+      x = small_rollout(run, start, steps, decode_positions(r["window"]))
+      out["agreement"]["reference"] = compare(
+          x[at], decode_positions(r["positions"]), "gns")
+  return out
+
+
+# ---------------------------------------------------------------- train ---
+
+
+def measure_training(sizes: Sizes, log: Callable[[str], None],
+                     workdir: str) -> dict[str, Any]:
+  """The train part: a dataset of the config's kind, then
+  ``train.train_and_evaluate`` for warm-up + timed steps (evaluation off,
+  one checkpoint at the end), its logged steps per second."""
+  config = gns_programs.load_config(sizes.train_config)
+  d = config.dataset
+  spec = mpm_dataset.DatasetSpec(num_train=sizes.train_trajectories,
+                                 num_test=1, num_frames=sizes.train_frames,
+                                 seed=d.seed, spacing=d.spacing,
+                                 connectivity_radius=d.connectivity_radius)
+  data_dir = os.path.join(workdir, "data")
+  _, gen_s = timing.wall(lambda: mpm_dataset.generate(spec, data_dir,
+                                                      workers=1))
+  total = sizes.train_warmup + sizes.train_steps
+  config.train.num_steps = total
+  config.log_every = sizes.train_log_every
+  config.eval.every_steps = 0
+  config.checkpoint.every_steps = 10 * total
+  config.checkpoint.named_steps = ()
+  config.checkpoint.keep = 1
+  run_dir = os.path.join(workdir, "run")
+  _, wall_s = timing.wall(lambda: train.train_and_evaluate(config, data_dir,
+                                                           run_dir))
+  with open(os.path.join(run_dir, "metrics.csv")) as f:
+    rows = [{"step": int(r["step"]), "steps_per_s": float(r["steps_per_s"]),
+             "wall_time_s": float(r["wall_time_s"])}
+            for r in csv.DictReader(f)]
+  timed = [r for r in rows if r["step"] > sizes.train_warmup]
+  rate = statistics.median(r["steps_per_s"] for r in timed)
+  at_warmup = [r for r in rows if r["step"] <= sizes.train_warmup]
+  t0 = at_warmup[-1]["wall_time_s"] if at_warmup else 0.0
+  overall = (timed[-1]["step"] - (at_warmup[-1]["step"] if at_warmup else 0)
+             ) / (timed[-1]["wall_time_s"] - t0)
+  out = {"config": sizes.train_config, "batch_size": config.train.batch_size,
+         "latent_size": config.model.latent_size,
+         "num_message_passing_steps":
+             config.model.num_message_passing_steps,
+         "dataset": {"trajectories": sizes.train_trajectories,
+                     "frames": sizes.train_frames, "generate_s": gen_s},
+         "warmup_steps": sizes.train_warmup, "timed_steps": sizes.train_steps,
+         "log_every": sizes.train_log_every, "intervals": timed,
+         "steps_per_s": rate, "steps_per_s_overall": overall,
+         "run_wall_s": wall_s,
+         "projected_h": {str(s): s / rate / 3600 for s in PAPER_TRAINING_H}}
+  log(f"training ({sizes.train_config} config, batch "
+      f"{config.train.batch_size}): {rate:.3g} steps/s (median of "
+      f"{len(timed)} intervals of {sizes.train_log_every}; overall "
+      f"{overall:.3g}) -> 1.5 M steps in "
+      f"{out['projected_h']['1500000']:.3g} h")
+  return out
+
+
+# ------------------------------------------------------------ agreement ---
+
+
+def compare(x: np.ndarray, ref: np.ndarray, kind: str) -> dict[str, Any]:
+  """This device's positions [2, N, 2] (early, final) against a CPU's.
+
+  Returns:
+    The differences at each, and whether each tolerance holds (the
+    per-particle final ones only for the MPM, see the module docstring).
+  """
+  early, final = difference(x[0], ref[0]), difference(x[-1], ref[-1])
+  checks = {"early_max": early["max_m"] <= EARLY_TOLERANCE_M,
+            **{f"final_{k}": final[k] <= FINAL_MEASURE_TOLERANCE_M
+               for k in MEASURES}}
+  if kind == "mpm":
+    checks["final_rms"] = final["rms_m"] <= FINAL_RMS_TOLERANCE_M
+    checks["final_max"] = final["max_m"] <= FINAL_MAX_TOLERANCE_M
+  return {"early": early, "final": final, "checks": checks,
+          "agrees": all(checks.values())}
+
+
+def twin_positions(kind: str, sizes: Sizes) -> dict[str, Any]:
+  """What the CPU twin computes (on this process's device): for "mpm" the
+  paper scene at the agreement frames, unperturbed and 1 ulp to the right;
+  for "gns" the small model's start window and its rollout at the
+  agreement steps, from it and from it 1 ulp to the right."""
+  if kind == "mpm":
+    scene, frames = paper_scene(sizes.frames), agreement_frames(sizes)
+    return {"positions": encode_positions(mpm_positions(scene, frames)),
+            "perturbed": encode_positions(mpm_positions(scene, frames,
+                                                        perturb=True))}
+  run, _, start, steps = small_model_start(sizes.small_frames)
+  at = gns_agreement_steps(steps)
+  return {"window": encode_positions(start.window),
+          "positions": encode_positions(small_rollout(run, start, steps)[at]),
+          "perturbed": encode_positions(small_rollout(
+              run, start, steps, one_ulp(start.window))[at])}
+
+
+def run_twin(kind: str, quick: bool, workdir: str) -> dict[str, Any]:
+  """``twin_positions`` in a child process on this machine's CPU
+  (``JAX_PLATFORMS=cpu``, the same jax)."""
+  path = os.path.join(workdir, f"twin_{kind}.json")
+  env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+  subprocess.run([sys.executable, "-m", "experiments.benchmarks.gpu_benchmark",
+                  "twin", kind, "quick" if quick else "full", path],
+                 check=True, env=env)
+  with open(path) as f:
+    return json.load(f)
+
+
+def _reference_part(reference: dict | None, part: str) -> dict | None:
+  if not reference:
+    return None
+  return reference.get("parts", {}).get(part)
+
+
+def mpm_agreement(out: dict, sizes: Sizes, twin, reference: dict | None,
+                  envelope_here: bool) -> None:
+  """Adds the MPM's comparisons to ``out["agreement"]``: against the twin
+  (with its envelope), against the reference, and (on the CPU, where this
+  process is the reference) the envelope of this device."""
+  a = out["agreement"]
+  mine = decode_positions(a["positions"])
+  scene = paper_scene(sizes.frames)
+  if envelope_here:
+    a["envelope"] = compare(mine, mpm_positions(scene, a["frames"],
+                                                perturb=True), "mpm")
+  if twin is not None:
+    cpu = twin("mpm")
+    a["twin"] = {"envelope": compare(decode_positions(cpu["positions"]),
+                                     decode_positions(cpu["perturbed"]),
+                                     "mpm"),
+                 "default": compare(mine, decode_positions(cpu["positions"]),
+                                    "mpm")}
+  ref = _reference_part(reference, "mpm")
+  if ref is not None and ref["agreement"]["frames"] == a["frames"]:
+    a["reference"] = compare(
+        mine, decode_positions(ref["agreement"]["positions"]), "mpm")
+
+
+def gns_envelope_here(out: dict, sizes: Sizes) -> None:
+  """On the CPU: the small model's envelope (a 1-ulp shift of its start)."""
+  s = out["small_model"]
+  run, _, start, steps = small_model_start(sizes.small_frames)
+  shifted = small_rollout(run, start, steps, one_ulp(start.window))
+  s["agreement"]["envelope"] = compare(
+      decode_positions(s["agreement"]["positions"]),
+      shifted[s["agreement"]["steps"]], "gns")
+
+
+# --------------------------------------------------------------- driver ---
+
+
+def load_reference(path: str | None) -> dict | None:
+  """The CPU reference report (None: no path, or no such file)."""
+  if not path or not os.path.exists(path):
+    return None
+  with open(path) as f:
+    return json.load(f)
+
+
+def is_accelerator() -> bool:
+  return jax.default_backend() != "cpu"
+
+
+def run_part(part: str, out_dir: str, *, quick: bool = False,
+             reference: dict | None = None, command: str = "",
+             accelerator: bool | None = None,
+             log: Callable[[str], None] = logging.info) -> str:
+  """Measures one part on this process's first device and writes
+  ``<stem>_<part>[_quick].json`` to ``out_dir``; returns its path.
+
+  ``accelerator`` (default: whether the first device is not a CPU) picks
+  the role: sizes, file names, and the comparisons with a CPU twin
+  process and ``reference`` (tests take the accelerator's path on the
+  CPU)."""
+  if accelerator is None:
+    accelerator = is_accelerator()
+  sizes = sizes_for(accelerator, quick)
+  results: dict[str, Any] = {
+      "part": part, "command": command,
+      "environment": timing.environment(quick, device_kind=jax.devices()[0]
+                                        .device_kind),
+      "sizes": dataclasses.asdict(sizes)}
+  with tempfile.TemporaryDirectory() as work:
+    twin = ((lambda kind: run_twin(kind, quick, work)) if accelerator
+            else None)
+    if part == "mpm":
+      results["mpm"] = measure_mpm(sizes, log)
+      mpm_agreement(results["mpm"], sizes, twin, reference,
+                    envelope_here=not accelerator)
+    elif part == "gns":
+      results["gns"] = measure_gns(sizes, log, twin, reference)
+      if not accelerator:
+        gns_envelope_here(results["gns"], sizes)
+    elif part == "train":
+      results["train"] = measure_training(sizes, log, work)
+    else:
+      raise ValueError(f"part {part!r}; allowed: {PARTS}")
+  timing.end_environment(results["environment"])
+  os.makedirs(out_dir, exist_ok=True)
+  path = os.path.join(out_dir, f"{stem_for(accelerator)}_{part}"
+                      + ("_quick" if quick else "") + ".json")
+  timing.write_json(path, results)
+  return path
+
+
+def read_parts(out_dir: str, accelerator: bool,
+               quick: bool) -> dict[str, dict]:
+  """The part files of one role found in ``out_dir``."""
+  parts = {}
+  suffix = "_quick" if quick else ""
+  for part in PARTS:
+    path = os.path.join(out_dir,
+                        f"{stem_for(accelerator)}_{part}{suffix}.json")
+    if os.path.exists(path):
+      with open(path) as f:
+        parts[part] = json.load(f)
+  return parts
+
+
+def write_report(out_dir: str, accelerator: bool, *, quick: bool = False,
+                 reference: dict | None = None,
+                 reference_path: str | None = None) -> dict[str, Any]:
+  """Assembles the parts in ``out_dir`` with the reference into
+  ``<report_name>[_quick].{json,md}``; returns the report (with
+  "markdown" and "files").
+
+  Raises:
+    FileNotFoundError: no part file of this role in ``out_dir``.
+  """
+  parts = read_parts(out_dir, accelerator, quick)
+  if not parts:
+    raise FileNotFoundError(
+        f"{out_dir}: no {stem_for(accelerator)}_<part>"
+        f"{'_quick' if quick else ''}.json to report on (parts: {PARTS})")
+  report = {"accelerator": accelerator, "reference_file": reference_path,
+            "reference_environment": (reference or {}).get("environment"),
+            "parts": {k: v[k] for k, v in parts.items()},
+            "environments": {k: v["environment"] for k, v in parts.items()},
+            "commands": {k: v["command"] for k, v in parts.items()},
+            "summary": summarise(parts, reference)}
+  timing.write_results(out_dir, report_name(accelerator), quick, report,
+                       to_markdown(report, reference))
+  return report
+
+
+def run_benchmark(out_dir: str, *, parts: Sequence[str] = PARTS,
+                  quick: bool = False, cpu_reference: str | None = None,
+                  command: str = "", accelerator: bool | None = None,
+                  log: Callable[[str], None] = logging.info
+                  ) -> dict[str, Any]:
+  """Runs ``parts`` (each written as it ends), then the report.
+
+  Args:
+    out_dir: directory of the part files and the report (created).
+    parts: subset of ``PARTS``; none: only the report, from the parts
+      already in ``out_dir``.
+    quick: tiny sizes (``QUICK``), seconds: a smoke test, not figures.
+    cpu_reference: the CPU reference report (``DEFAULT_REFERENCE``); on the
+      CPU itself it is not read (this run is one).
+    command: the command line, recorded.
+    accelerator: the role (default: whether the first device is not a
+      CPU; see ``run_part``).
+    log: called with one line per measurement.
+
+  Returns:
+    The report (its JSON's content, "markdown" and "files").
+  """
+  if accelerator is None:
+    accelerator = is_accelerator()
+  reference = load_reference(cpu_reference) if accelerator else None
+  if accelerator and reference is None:
+    log(f"no CPU reference ({cpu_reference}): figures without ratios")
+  for part in parts:
+    path = run_part(part, out_dir, quick=quick, reference=reference,
+                    command=command, accelerator=accelerator, log=log)
+    log(f"wrote {path}")
+  return write_report(out_dir, accelerator, quick=quick,
+                      reference=reference,
+                      reference_path=cpu_reference if reference else None)
+
+
+def report_all(out_dir: str, *, quick: bool = False,
+               cpu_reference: str | None = DEFAULT_REFERENCE
+               ) -> list[dict[str, Any]]:
+  """Rebuilds the report of each role whose part files are in
+  ``out_dir`` (``--gpu_parts=report``): the accelerator's with the CPU
+  reference, the CPU reference's. Measures nothing, needs no device.
+
+  Raises:
+    FileNotFoundError: no part file of either role in ``out_dir``.
+  """
+  reports = []
+  for accelerator in (True, False):
+    if read_parts(out_dir, accelerator, quick):
+      reference = load_reference(cpu_reference) if accelerator else None
+      reports.append(write_report(
+          out_dir, accelerator, quick=quick, reference=reference,
+          reference_path=cpu_reference if reference else None))
+  if not reports:
+    raise FileNotFoundError(
+        f"{out_dir}: no gpu_<part>{'_quick' if quick else ''}.json nor "
+        f"gpu_cpu_<part>{'_quick' if quick else ''}.json to report on")
+  return reports
+
+
+# -------------------------------------------------------------- summary ---
+
+
+def _get(d, *keys):
+  for k in keys:
+    if d is None:
+      return None
+    d = d.get(k) if isinstance(d, dict) else None
+  return d
+
+
+def _rows_by(rows, key):
+  return {r[key]: r for r in rows or []}
+
+
+def summarise(parts: dict[str, dict], reference: dict | None
+              ) -> dict[str, Any]:
+  """The headline figures, the reference's beside them, and the targets."""
+  ref = (reference or {}).get("parts", {})
+  s: dict[str, Any] = {}
+  m, rm = _get(parts, "mpm", "mpm"), ref.get("mpm")
+  if m:
+    best = max([r["particle_substeps_per_s"] for r in m["vmapped"]]
+               + [_get(m, "largest_batch", "particle_substeps_per_s") or 0])
+    s["mpm"] = {
+        "single_s": m["single"]["median_s"],
+        "single_s_cpu": _get(rm, "single", "median_s"),
+        "best_particle_substeps_per_s": best,
+        "target_particle_substeps_per_s": TARGET_PARTICLE_SUBSTEPS_PER_S,
+        "target_met": best >= TARGET_PARTICLE_SUBSTEPS_PER_S,
+        "dataset_h": m["dataset"]["dataset_h"],
+        "dataset_h_cpu": _get(rm, "dataset", "dataset_h")}
+  g, rg = _get(parts, "gns", "gns"), ref.get("gns")
+  if g:
+    rows = _rows_by(g["rollouts"], "batch")
+    single = rows.get(1, {}).get("s_per_simulation")
+    best = min(r["s_per_simulation"] for r in g["rollouts"])
+    mpm_here = _get(s, "mpm", "single_s")
+    mpm_cpu = (_get(rm, "single", "median_s") if reference else
+               _get(s, "mpm", "single_s"))
+    s["gns"] = {
+        "single_s": single, "best_batched_s": best,
+        "single_s_cpu": _get(_rows_by(_get(rg, "rollouts"), "batch"), 1,
+                             "s_per_simulation"),
+        "mpm_same_device_s": mpm_here, "mpm_cpu_s": mpm_cpu,
+        "mpm_cpu_over_gns": _ratio(mpm_cpu, single),
+        "mpm_same_device_over_gns": _ratio(mpm_here, single),
+        "target_cheaper": TARGET_GNS_CHEAPER_THAN_CPU_MPM,
+        "target_met": (None if mpm_cpu is None or single is None else
+                       mpm_cpu / single >= TARGET_GNS_CHEAPER_THAN_CPU_MPM)}
+  t, rt = _get(parts, "train", "train"), ref.get("train")
+  if t:
+    h = t["projected_h"]["1500000"]
+    s["train"] = {"steps_per_s": t["steps_per_s"],
+                  "steps_per_s_cpu": _get(rt, "steps_per_s"),
+                  "projected_h": t["projected_h"],
+                  "paper_h": {str(k): v for k, v in PAPER_TRAINING_H.items()},
+                  "target_h": TARGET_TRAINING_H,
+                  "target_met": h < TARGET_TRAINING_H}
+  return s
+
+
+# -------------------------------------------------------------- markdown ---
+
+
+def _met(v):
+  return "n/a" if v is None else ("**met**" if v else "**missed**")
+
+
+def _x(a, b):
+  """'a/b x' speed-up of b over a, or '-'."""
+  r = _ratio(a, b)
+  return "-" if r is None else f"{r:.3g}x"
+
+
+def _env_line(env: dict | None) -> str:
+  if not env:
+    return "not available"
+  return (f"{env.get('device_kind', '?')} ({', '.join(env['jax_devices'])}), "
+          f"jax {env['jax_version']} on {env['jax_backend']}, "
+          f"{env['platform']}, {env['cpu_count']} CPUs, load average "
+          f"{env['load_average_start'][0]:.2f} at the start, {env['date']}")
+
+
+def _agreement_lines(title: str, a: dict) -> list[str]:
+  lines = [f"| {title} | early max (m) | final max (m) | final rms (m) | "
+           "front (m) | centre x (m) | agrees |",
+           "|---|---|---|---|---|---|---|"]
+  for name, key in (("against the twin CPU, default precision", ("twin",
+                                                                  "default")),
+                    ("against the twin CPU, highest precision", ("twin",
+                                                                  "highest")),
+                    ("the twin CPU's own envelope (1 ulp)", ("twin",
+                                                            "envelope")),
+                    ("against the CPU reference", ("reference",)),
+                    ("envelope here (1 ulp of the start)", ("envelope",))):
+    c = _get(a, *key)
+    if c is None:
+      continue
+    e, f = c["early"], c["final"]
+    lines.append(f"| {name} | {e['max_m']:.2g} | {f['max_m']:.2g} | "
+                 f"{f['rms_m']:.2g} | {f['front_1pct_m']:.2g} | "
+                 f"{f['centre_x_m']:.2g} | "
+                 + ("envelope" if "envelope" in key else
+                    ("yes" if c["agrees"] else "**no**: " + ", ".join(
+                        k for k, ok in c["checks"].items() if not ok)))
+                 + " |")
+  return lines + [""]
+
+
+def to_markdown(report: dict, reference: dict | None) -> str:
+  """The report as Markdown: every figure with the reference's beside it."""
+  parts, s = report["parts"], report["summary"]
+  ref = (reference or {}).get("parts", {})
+  cpu = not report["accelerator"]
+  quick = any(e.get("quick") for e in report["environments"].values())
+  lines = ["# " + ("The GPU benchmark's programs on this CPU (reference)"
+                   if cpu else "Accelerator benchmark: MPM, GNS, training, "
+                   "agreement") + (" (quick: not figures)" if quick else ""),
+           ""]
+  for part, env in report["environments"].items():
+    lines.append(f"- {part}: `{report['commands'][part]}`; "
+                 f"{_env_line(env)}")
+  if not cpu:
+    lines.append(f"- CPU reference (`{report['reference_file']}`): "
+                 + _env_line(report.get("reference_environment")))
+  lines += ["", "Compilation apart, a warm-up call, synchronised, medians "
+            "of repeats. *Extrapolated*: fewer frames or steps were run and "
+            "the time per substep or step scaled to the whole trajectory.",
+            "", "CPU columns: the same code at the reference's sizes on "
+            "this project's CPU; ratio = CPU time / this device's time."
+            if not cpu else "", ""]
+  m = _get(parts, "mpm")
+  if m:
+    rm = ref.get("mpm")
+    sc = m["scene"]
+    lines += [f"## MPM: the paper scene ({sc['n_particles']} particles, "
+              f"{sc['frames']} frames, {sc['n_substeps_per_frame']} "
+              "substeps per frame)", "",
+              "| run | s per trajectory | particle-substeps/s | CPU s per "
+              "trajectory | ratio |", "|---|---|---|---|---|"]
+    single = m["single"]
+    cpu_single = _get(rm, "single", "s_per_trajectory")
+    lines.append(f"| one at a time (`mpm.simulate`) | "
+                 f"{single['s_per_trajectory']:.4g} | "
+                 f"{single['particle_substeps_per_s']:.3g} | "
+                 f"{_fmt(cpu_single, '.4g')} | "
+                 f"{_x(cpu_single, single['s_per_trajectory'])} |")
+    rv = _rows_by(_get(rm, "vmapped"), "batch")
+    for r in m["vmapped"]:
+      c = _get(rv, r["batch"], "s_per_trajectory")
+      lines.append(f"| vmapped x{r['batch']} | {r['s_per_trajectory']:.4g}"
+                   + (" (extrapolated)" if r["extrapolated"] else "") +
+                   f" | {r['particle_substeps_per_s']:.3g} | "
+                   f"{_fmt(c, '.4g')} | {_x(c, r['s_per_trajectory'])} |")
+    lb = m["largest_batch"]
+    if "batch" in lb:
+      lines.append(f"| largest batch, x{lb['batch']} ({lb['frames'] - 1} "
+                   f"frames) | {lb['s_per_trajectory']:.4g} (extrapolated)"
+                   f" | {lb['particle_substeps_per_s']:.3g} | - | - |")
+    sm = s["mpm"]
+    lines += ["", f"- Sizing (`batch_size_for`): "
+              f"{lb['sizing']['batch']} scenes ({lb['sizing']['source']}; "
+              f"{lb['sizing']['per_scene_bytes'] / 2**20:.2f} MiB per scene,"
+              f" {lb['sizing']['fixed_bytes'] / 2**20:.2f} MiB fixed), run "
+              f"at {lb.get('batch', 'none')} (cap {lb['cap']})"
+              + (f"; out of memory at {[f['batch'] for f in lb['failed']]}"
+                 if lb["failed"] else "") + ".",
+              f"- Target, batched MPM at least "
+              f"{TARGET_PARTICLE_SUBSTEPS_PER_S:.0e} particle-substeps/s: "
+              + ("not an accelerator" if cpu else
+                 f"{_met(sm['target_met'])} (best "
+                 f"{sm['best_particle_substeps_per_s']:.3g})") + ".",
+              f"- The paper's dataset ({PAPER_DATASET} trajectories of 600 "
+              f"frames), simulation only, extrapolated from one batch of "
+              f"{m['dataset']['batch']} of its scenes run for "
+              f"{m['dataset']['frames_run']} frames: "
+              f"**{m['dataset']['dataset_h']:.3g} h**"
+              + (f" (CPU reference: {sm['dataset_h_cpu']:.3g} h)"
+                 if sm.get("dataset_h_cpu") else "") + ".", ""]
+    if m["spacings"]:
+      rs = _rows_by(_get(rm, "spacings"), "spacing_m")
+      lines += ["Speed/accuracy study's MPM rows (the paper scene at each "
+                "spacing; errors: docs/tradeoff.md):", "",
+                "| spacing (mm) | particles | s per trajectory | CPU | "
+                "ratio |", "|---|---|---|---|---|"]
+      for r in m["spacings"]:
+        c = _get(rs, r["spacing_m"], "s_per_trajectory")
+        lines.append(f"| {r['spacing_m'] * 1000:g} | {r['particles']} | "
+                     f"{r['s_per_trajectory']:.4g} | {_fmt(c, '.4g')} | "
+                     f"{_x(c, r['s_per_trajectory'])} |")
+      lines.append("")
+    lines += ["### Agreement of the paper scene with a CPU", "",
+              f"Frames {m['agreement']['frames']}. Tolerances: early max "
+              f"{EARLY_TOLERANCE_M:g} m; final rms {FINAL_RMS_TOLERANCE_M:g}"
+              f" m, max {FINAL_MAX_TOLERANCE_M:g} m (one cell), front and "
+              f"centre {FINAL_MEASURE_TOLERANCE_M:g} m (why: "
+              "`experiments/benchmarks/gpu_benchmark.py`).", ""]
+    lines += _agreement_lines("MPM", m["agreement"])
+  g = _get(parts, "gns")
+  if g:
+    rg = ref.get("gns")
+    sc, md = g["scene"], g["model"]
+    lines += [f"## GNS: the {md['config']} model (latent "
+              f"{md['latent_size']}, {md['num_message_passing_steps']} "
+              f"steps) rolling out the paper trajectory ({sc['n_sand']} "
+              f"sand + {sc['n_nodes'] - sc['n_sand']} boundary nodes, "
+              f"{sc['learned_steps']} learned steps)", "",
+              "| rollout | s per simulation | steps/s | CPU s per "
+              "simulation | ratio |", "|---|---|---|---|---|"]
+    rr = _rows_by(_get(rg, "rollouts"), "batch")
+    for r in g["rollouts"]:
+      c = _get(rr, r["batch"], "s_per_simulation")
+      lines.append(f"| {'alone' if r['batch'] == 1 else 'x%d' % r['batch']}"
+                   f" | {r['s_per_simulation']:.4g}"
+                   + (" (extrapolated)" if r["extrapolated"] else "") +
+                   f" | {r['steps_per_s']:.3g} | {_fmt(c, '.4g')}"
+                   + (" (extrapolated)" if _get(rr, r["batch"],
+                                                "extrapolated") else "") +
+                   f" | {_x(c, r['s_per_simulation'])} |")
+    sg = s["gns"]
+    lines += ["", "Table 2 (seconds per simulation of a paper trajectory):",
+              "", "| | this device | the paper |", "|---|---|---|",
+              f"| GNS | {_fmt(sg['single_s'], '.4g')} alone, "
+              f"{sg['best_batched_s']:.4g} batched | {PAPER_GNS_S[0]}-"
+              f"{PAPER_GNS_S[1]} (V100) |",
+              f"| MPM, same device | {_fmt(sg['mpm_same_device_s'], '.4g')}"
+              f" | - |",
+              f"| MPM, this project's CPU | {_fmt(sg['mpm_cpu_s'], '.4g')} "
+              f"| {PAPER_MPM_S[0]:g}-{PAPER_MPM_S[1]:g} (its CPU) |", "",
+              f"- MPM on the CPU / GNS alone: "
+              f"{_fmt(sg['mpm_cpu_over_gns'], '.3g')}x (target at least "
+              f"{TARGET_GNS_CHEAPER_THAN_CPU_MPM:g}x: "
+              f"{_met(sg['target_met']) if not cpu else 'not an accelerator'}"
+              f"); MPM on the same device / GNS alone: "
+              f"{_fmt(sg['mpm_same_device_over_gns'], '.3g')}x.",
+              f"- The model: {md['parameters']} (see the module docstring).",
+              ""]
+    sm = g["small_model"]
+    rsm = _get(rg, "small_model")
+    lines += [f"The shipped small model on its scene ({sm['particles']} "
+              f"particles, {sm['steps']} steps of stride "
+              f"{sm['frame_stride']}): {sm['s_per_simulation']:.4g} s per "
+              "simulation"
+              + (f" (CPU reference: {rsm['s_per_simulation']:.4g} s, "
+                 f"{_x(rsm['s_per_simulation'], sm['s_per_simulation'])})"
+                 if rsm else "") + ".", "",
+              "### Agreement of the small model's rollout with a CPU", "",
+              f"Steps {sm['agreement']['steps']}. Tolerances: early max "
+              f"{EARLY_TOLERANCE_M:g} m; front and centre "
+              f"{FINAL_MEASURE_TOLERANCE_M:g} m at the end (single particles "
+              "are not compared there).", ""]
+    lines += _agreement_lines("GNS", sm["agreement"])
+  t = _get(parts, "train")
+  if t:
+    rt = ref.get("train")
+    st = s["train"]
+    lines += [f"## Training: the {t['config']} config (batch "
+              f"{t['batch_size']}, latent {t['latent_size']}, "
+              f"{t['num_message_passing_steps']} steps)", "",
+              "| | steps/s | 1.5 M steps (h) | 2 M steps (h) |",
+              "|---|---|---|---|",
+              f"| this device | {t['steps_per_s']:.3g} | "
+              f"{t['projected_h']['1500000']:.3g} | "
+              f"{t['projected_h']['2000000']:.3g} |"]
+    if rt:
+      lines.append(f"| CPU reference | {rt['steps_per_s']:.3g} | "
+                   f"{rt['projected_h']['1500000']:.3g} | "
+                   f"{rt['projected_h']['2000000']:.3g} |")
+    lines += [f"| the paper (V100) | - | {PAPER_TRAINING_H[1_500_000]} | "
+              f"{PAPER_TRAINING_H[2_000_000]} |", "",
+              f"Median of {len(t['intervals'])} intervals of "
+              f"{t['log_every']} steps after {t['warmup_steps']} warm-up "
+              f"steps (overall {t['steps_per_s_overall']:.3g} steps/s), "
+              "`train.train_and_evaluate` with evaluation off, on "
+              f"{t['dataset']['trajectories']} generated trajectories of "
+              f"{t['dataset']['frames']} frames. Target, 1.5 M steps in "
+              f"under {TARGET_TRAINING_H:g} h: "
+              + ("not an accelerator" if cpu else _met(st["target_met"]))
+              + ".", ""]
+  return "\n".join(lines)
+
+
+def _twin_main(argv: list[str]) -> None:
+  """``python -m experiments.benchmarks.gpu_benchmark twin KIND SIZES
+  PATH``: ``twin_positions`` written to PATH (JSON)."""
+  _, kind, which, path = argv
+  sizes = QUICK if which == "quick" else FULL
+  mpm_io.write_text(path, json.dumps(twin_positions(kind, sizes)))
+
+
+if __name__ == "__main__":
+  _twin_main(sys.argv[1:])
