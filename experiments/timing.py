@@ -188,8 +188,7 @@ def write_json(path: str, content: Any) -> None:
   """Writes ``content`` as indented JSON (numpy values as numbers) to
   ``path``, atomically."""
   mpm_io.write_text(path, json.dumps(content, indent=1,
-                                     default=_json_default) + "
-")
+                                     default=_json_default) + "\n")
 
 
 def write_results(out_dir: str, name: str, quick: bool,

@@ -17,9 +17,12 @@ Modules (import them directly; importing ``gnsjax`` loads nothing heavy):
   deposit, sand inside solids or outside the domain).
 - ``gnsjax.design``: inverse design of an obstacle's placement by gradients
   through the GNS or the MPM (a package: placement, objectives, rollouts,
-  optimize, study).
+  optimize, smoothing, baselines, calibration's solver, scenes).
+- ``gnsjax.config``: a training config's keys and ranges, checked before
+  any work.
 
-The paper's evaluation is ``experiments.evaluation``; pictures are drawn in
+The studies (the paper's evaluation, stability, the speed/accuracy trade,
+inverse design, ...) are ``experiments.studies``; pictures are drawn in
 ``experiments.figures``; npz datasets of DeepMind's and
 geoelements' GNS are read and written by ``mpm.interop``.
 """
