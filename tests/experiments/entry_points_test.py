@@ -73,7 +73,7 @@ class LayoutTest(absltest.TestCase):
                 files("gnsjax", "**", "*.py") if lines(p) > 600]
     self.assertEqual(too_long, [], "library files over 600 lines")
     entry_points = [p for p in files("experiments", "*.py")
-                    if "runtime.run(main)" in open(p).read()]
+                    if 'if __name__ == "__main__":' in open(p).read()]
     self.assertGreater(len(entry_points), 10)
     self.assertEqual([os.path.relpath(p, ROOT) for p in entry_points
                       if lines(p) > 200], [], "entry points over 200 lines")
