@@ -15,10 +15,9 @@ import jax
 from ml_collections import config_flags
 
 from experiments import runtime
-from gnsjax import config as config_lib
 from gnsjax import distributed
-# gnsjax.train is imported in main, after the distributed runtime starts:
-# importing it (jax_md) initialises JAX's backend.
+# gnsjax.train and gnsjax.config are imported in main, after the distributed
+# runtime starts: importing them (jax_md) initialises JAX's backend.
 
 _CONFIG = config_flags.DEFINE_config_file("config", None, "Config file.",
                                           lock_config=True)
@@ -52,7 +51,10 @@ def main(argv):
                         _INIT_TIMEOUT_S.value)
   runtime.enable_compilation_cache()
   distributed.initialize(processes, _INIT_TIMEOUT_S.value)
-  from gnsjax import train  # pylint: disable=g-import-not-at-top
+  # pylint: disable=g-import-not-at-top
+  from gnsjax import config as config_lib
+  from gnsjax import train
+  # pylint: enable=g-import-not-at-top
   try:
     config_lib.check_config(_CONFIG.value)
   except ValueError as e:
