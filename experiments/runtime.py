@@ -9,6 +9,7 @@ it refuses it raises as ``InputError`` (or ``app.UsageError``).
 import dataclasses
 import math
 import os
+import platform
 import sys
 import typing
 from typing import Any, Callable
@@ -17,6 +18,7 @@ from absl import app
 from absl import flags
 from absl import logging
 import jax
+from jax._src import xla_bridge  # no public backends_are_initialized
 
 import mpm
 from experiments.studies import settings as settings_lib
@@ -129,12 +131,45 @@ def writable(flag: str, path: str, *, directory: bool = True) -> str:
   return path
 
 
+# XLA:CPU (jaxlib 0.10.1) adds the tuning features +prefer-no-gather and
+# +prefer-no-scatter to every program it compiles for an AVX-512 host, and
+# its loader of cached programs checks every "+" feature against the host's
+# CPU features, where tuning features never appear: each program loaded
+# from the compilation cache logged two errors ("Loading XLA:CPU AOT result.
+# Target machine feature +prefer-no-gather is not supported on the host
+# machine ...") and ran all the same. Programs compiled for AVX2 carry no
+# such features. On the development machine (Zen 4) AVX2 is no slower: the
+# MPM substep 10% faster, the GNS steps the same (docs/performance.md).
+CPU_MAX_ISA = "AVX2"
+
+
+def cap_cpu_isa() -> None:
+  """Compiles for at most AVX2 on x86-64 (``--xla_cpu_max_isa``, added to
+  ``$XLA_FLAGS`` unless it sets a maximum ISA already), so that programs
+  loaded from the compilation cache log no false feature mismatch.
+
+  XLA reads ``$XLA_FLAGS`` once, when jax starts its backend: this has no
+  effect after the first computation (or an import of jax_md, which starts
+  it), and is then left out, so that child processes compile as this one.
+  ``experiments/__init__.py`` calls it, before any entry point's imports.
+  """
+  flags_now = os.environ.get("XLA_FLAGS", "")
+  if (platform.machine().lower() not in ("x86_64", "amd64")
+      or "xla_cpu_max_isa" in flags_now
+      or xla_bridge.backends_are_initialized()):
+    return
+  os.environ["XLA_FLAGS"] = (
+      f"{flags_now} --xla_cpu_max_isa={CPU_MAX_ISA}".strip())
+
+
 def enable_compilation_cache(path: str | None = None) -> str:
-  """Caches compiled XLA programs on disk, so reruns skip compilation.
+  """Caches compiled XLA programs on disk, so reruns skip compilation
+  (and caps the instruction set for them, ``cap_cpu_isa``).
 
   Returns:
     The cache directory (``$GNSJAX_CACHE_DIR`` or ~/.cache/gnsjax/jax).
   """
+  cap_cpu_isa()
   path = path or os.environ.get("GNSJAX_CACHE_DIR") or os.path.join(
       os.path.expanduser("~"), ".cache", "gnsjax", "jax")
   jax.config.update("jax_compilation_cache_dir", path)

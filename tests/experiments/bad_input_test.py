@@ -14,6 +14,7 @@ import numpy as np
 import mpm
 from mpm import io as mpm_io
 from tests.experiments import entry_points_test
+from tests.experiments import forked
 
 ROOT = entry_points_test.ROOT
 SMALL = "--config=experiments/configs/small.py"
@@ -29,6 +30,15 @@ def run(*args):
   proc = subprocess.run([sys.executable, "-m", *args], env=env, cwd=ROOT,
                         capture_output=True, text=True, timeout=120)
   return proc.returncode, proc.stdout, proc.stderr
+
+
+def server() -> forked.Server:
+  """``run``'s processes as forks of one that has imported the libraries
+  (each row then starts in a fraction of a second; tests/experiments/
+  forked.py)."""
+  return forked.Server(ROOT, dict(
+      os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
+      GNSJAX_CACHE_DIR=os.path.join(ROOT, ".jax_cache")))
 
 
 # (name, module, argv, expected in the message). In argv, {d} is a fresh
@@ -262,6 +272,7 @@ class BadInputTest(parameterized.TestCase):
     super().setUpClass()
     cls._tmp = tempfile.TemporaryDirectory()
     d = cls.dir = cls._tmp.name
+    cls.server = server()
     tiny = dict(entry_points_test.TINY_SCENE)
     for name, scene in (
         ("tiny", tiny),
@@ -288,13 +299,15 @@ class BadInputTest(parameterized.TestCase):
 
   @classmethod
   def tearDownClass(cls):
+    cls.server.close()
     cls._tmp.cleanup()
     super().tearDownClass()
 
   @parameterized.named_parameters(*ROWS)
   def test_refused(self, module, argv, expected):
     before = sorted(os.listdir(self.dir))
-    code, stdout, stderr = run(module, *[a.format(d=self.dir) for a in argv])
+    code, stdout, stderr = self.server.run(
+        module, *[a.format(d=self.dir) for a in argv])
     self.assertEqual(code, 2, f"{stdout}\n{stderr}")
     # One line, the message naming what was wrong; no traceback.
     self.assertEqual(stderr.strip(), stderr.strip().splitlines()[0], stderr)

@@ -138,9 +138,12 @@ class EntryPointsTest(absltest.TestCase):
 
   def test_generate_dataset_and_verify(self):
     out = os.path.join(self.dir, "data")
+    # One scene per split: the splits' plans and the writer are the library's
+    # (tests/mpm/dataset_test.py); here, the entry point end to end.
     run("experiments.generate_dataset",
         "--config=experiments/configs/test.py", f"--out={out}",
-        "--config.dataset.num_frames=8", "--config.dataset.num_train=2")
+        "--config.dataset.num_frames=8", "--config.dataset.num_train=1",
+        "--config.dataset.num_test=1")
     self.assertEqual(sorted(os.listdir(out)),
                      ["metadata.json", "test.h5", "train.h5"])
     self.assertIn("OK", run("experiments.generate_dataset",

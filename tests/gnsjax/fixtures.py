@@ -1,5 +1,6 @@
 """Tiny datasets and configs shared by the gnsjax tests (cached per process)."""
 
+import fcntl
 import functools
 import os
 import tempfile
@@ -17,8 +18,21 @@ _TMP = tempfile.TemporaryDirectory()
 
 @functools.lru_cache(maxsize=None)
 def tiny_dataset() -> str:
-  path = os.path.join(_TMP.name, "data")
-  dataset.generate(SPEC, path, workers=1)
+  """The dataset's directory: generated once per process, or once per run
+  under pytest-xdist, where the workers share it (a directory named after
+  the run, written under a lock by the first worker that needs it)."""
+  run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+  if run is None:
+    path = os.path.join(_TMP.name, "data")
+    dataset.generate(SPEC, path, workers=1)
+    return path
+  shared = os.path.join(tempfile.gettempdir(), f"gnsjax-tests-{run}")
+  os.makedirs(shared, exist_ok=True)
+  path = os.path.join(shared, "data")
+  with open(os.path.join(shared, "lock"), "w") as lock:
+    fcntl.flock(lock, fcntl.LOCK_EX)
+    if not os.path.exists(os.path.join(path, "metadata.json")):
+      dataset.generate(SPEC, path, workers=1)
   return path
 
 

@@ -404,11 +404,17 @@ class DataParallelTest(absltest.TestCase):
         "print('DEVICES', jax.local_device_count())\n")
     results = {}
     with tempfile.TemporaryDirectory() as d:
-      for devices in (1, 2):
+      # One device: this process's (the script's run, in this process).
+      self.assertEqual(jax.local_device_count(), 1)
+      config = fixtures.tiny_config(num_steps=4, batch_size=2)
+      config.log_every = 1
+      train.train_and_evaluate(config, data, os.path.join(d, "1"))
+      results[1] = _losses(os.path.join(d, "1"))
+      for devices in (2,):
         env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
                    GNSJAX_CACHE_DIR=CACHE,
-                   XLA_FLAGS=f"--xla_force_host_platform_device_count="
-                   f"{devices}")
+                   XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} "
+                   f"--xla_force_host_platform_device_count={devices}")
         workdir = os.path.join(d, str(devices))
         out = subprocess.run([sys.executable, "-c", script, data, workdir],
                              env=env, cwd=ROOT, capture_output=True,

@@ -7,6 +7,7 @@ from absl.testing import parameterized
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import mpm
 from gnsjax import graph
@@ -38,14 +39,20 @@ class GradientTest(parameterized.TestCase):
     self.assertGreater(abs(float(grad["x"])), 1e-4)  # the obstacle matters
     np.testing.assert_allclose(float(grad["x"]), fd["x"], rtol=rtol)
 
-  @parameterized.parameters("centroid", "runout")
-  def test_mpm_gradient_matches_central_differences(self, name):
+  def _check_mpm(self, name):
     # Differences converge to the derivative as h shrinks (measured: 5%
     # off at h = 1e-3 m, 0.4% at 3e-4 m; contact makes the objective curve).
     p = Placement(scene(num_frames=40))
     obj = objectives.make(name, target_x=1.0)
     self._check(rollouts.MPMDriver(rollouts.MPMRollout.create(p)),
                 obj.smooth, X, 3e-4, 0.05)
+
+  def test_mpm_gradient_matches_central_differences(self):
+    self._check_mpm("centroid")
+
+  @pytest.mark.slow  # the runout's gradient: the four-parameter test's
+  def test_mpm_gradient_of_the_runout_matches_central_differences(self):
+    self._check_mpm("runout")
 
   def test_mpm_gradient_in_four_parameters_matches_central_differences(self):
     # Two obstacles, x and radius each, on 40 frames: every entry matters
@@ -207,7 +214,7 @@ class NonFiniteGradientTest(absltest.TestCase):
 
   def test_gns_error_names_the_scene_and_the_frame(self):
     p = Placement(scene())
-    driver = tiny_gns(p, num_frames=C + 4)
+    driver = tiny_gns(p, num_frames=C + 2)   # two learned steps
     params = p.initial()
     # The untrained model moves the sand at random: take the coordinate
     # (particle i, axis a, sign s) that first leaves its range at the

@@ -152,15 +152,16 @@ class MPMSmoothingTest(absltest.TestCase):
 
   def test_one_design_at_a_time_equals_the_batch(self):
     # The host loop (what the GNS's driver uses) and the vmapped MPM
-    # program: the same designs, the same estimates.
+    # program: the same designs, the same estimates. (Two samples: the
+    # programs of the other tests here.)
     driver = rollouts.MPMDriver(self.sim)
     params = {"x": jnp.float32(X)}
     for estimator in smoothing.ESTIMATORS:
       batched = smoothing.mpm_smoothed_value_and_grad(
-          self.sim, self.objective, params, KEY, sigma=0.01, num_samples=4,
+          self.sim, self.objective, params, KEY, sigma=0.01, num_samples=2,
           estimator=estimator)
       looped = smoothing.looped_smoothed_value_and_grad(
-          driver, self.objective, params, KEY, sigma=0.01, num_samples=4,
+          driver, self.objective, params, KEY, sigma=0.01, num_samples=2,
           estimator=estimator)
       np.testing.assert_allclose(looped[0], batched[0], rtol=1e-5)
       for got, want in zip(looped[1:], batched[1:]):
