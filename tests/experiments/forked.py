@@ -33,10 +33,11 @@ PRELOAD = (
     "ml_collections.config_flags", "mpm", "mpm.dataset", "mpm.io",
     "mpm.sampler", "gnsjax.checkpoint", "gnsjax.data", "gnsjax.distributed",
     "gnsjax.features", "gnsjax.metrics", "gnsjax.models",
-    "gnsjax.simulator", "experiments.runtime", "experiments.tasks",
+    "gnsjax.simulator", "experiments.runtime", "experiments.file_jobs",
     "experiments.figures", "experiments.configs.paper",
     "experiments.configs.small", "experiments.configs.test",
-    "experiments.benchmarks.timing", "experiments.benchmarks.scenes")
+    "experiments.timing", "experiments.studies.settings",
+    "experiments.benchmarks.scenes")
 TIMEOUT_S = 120  # per run, as a subprocess's timeout
 
 
