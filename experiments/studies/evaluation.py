@@ -377,6 +377,11 @@ def _ratio(value) -> str:
   return "" if value is None else f"{value:.3g}"
 
 
+def _free(row: dict, key: str) -> str:
+  """A free-rollout figure, or "not run" (``--nounconstrained``)."""
+  return f"{row[key]:.1%}" if key in row else "not run"
+
+
 def report(summary: dict[str, Any]) -> str:
   """The Markdown report of an evaluation (``run``'s summary, or the
   ``summary.json`` it wrote)."""
@@ -412,7 +417,7 @@ def report(summary: dict[str, Any]) -> str:
         f"{g['median_front_error_relative']:.1%} | "
         f"{g['median_deposit_error']:.4f} | {g['max_inside_solids']:.1%} | "
         f"{g['max_outside_domain']:.1%} | "
-        f"{g.get('free_max_inside_solids', float('nan')):.1%} | "
+        f"{_free(g, 'free_max_inside_solids')} | "
         f"{g['mean_pushed_fraction']:.2%} | {g['max_pushed_depth']:.4f} | "
         f"{100 * g['median_final_speed']:.1f} / "
         f"{100 * g['median_mpm_final_speed']:.1f} | "
@@ -451,5 +456,5 @@ def report(summary: dict[str, Any]) -> str:
         f"| {r['index']} | {r['group']} | {r['particles']} | "
         f"{r['mean_mse']:.2e} | {r['front_error_relative']:.1%} | "
         f"{r['deposit_error']:.4f} | {r['max_inside_solids']:.1%} | "
-        f"{r.get('free_final_inside_solids', float('nan')):.1%} |")
+        f"{_free(r, 'free_final_inside_solids')} |")
   return "\n".join(lines) + "\n"

@@ -219,6 +219,9 @@ class RolloutSplitTest(absltest.TestCase):
       self.assertEqual(evaluation.report(json.load(f)),
                        evaluation.report(summary))
     self.assertIn(f"| 0 | {row['group']} |", evaluation.report(summary))
+    # Without the free rollout its columns say so (not "nan%").
+    self.assertIn("| not run |", evaluation.report(summary))
+    self.assertNotIn("nan", evaluation.report(summary))
 
 
 class SettingsTest(absltest.TestCase):
