@@ -84,15 +84,15 @@ def animate(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
 
   Args:
     panels: (title, positions [T, N, 2]) pairs with equal T.
-    out: path; ``.mp4`` needs ffmpeg on PATH (else a ``.gif`` is written
-      beside it), ``.gif`` needs only Pillow.
+    out: path; ``.mp4`` needs ffmpeg on PATH, ``.gif`` only Pillow.
     stride: draw every ``stride``-th frame.
 
   Returns:
     The path written.
   """
   if out.endswith(".mp4") and shutil.which("ffmpeg") is None:
-    out = out[:-4] + ".gif"
+    raise mpm.InputError(f"{out}: an .mp4 needs ffmpeg on PATH, which this "
+                         "machine lacks; allowed: a .gif, or install ffmpeg")
   fig, axes = _panels(len(panels))
   dots = []
   for ax, (title, x) in zip(axes, panels):

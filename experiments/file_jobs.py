@@ -40,27 +40,37 @@ def _nth(path: str, index: int) -> mpm_io.Trajectory:
   return trajectories[index]
 
 
+def default_frames(num_frames: int, count: int = 6) -> list[int]:
+  """``count`` frame indices from the first to the last (fewer if the
+  trajectory is shorter): the grid shows the start and the deposit."""
+  return sorted({int(f) for f in np.linspace(0, num_frames - 1, count).round()})
+
+
+def _stem(path: str) -> str:
+  return os.path.splitext(os.path.basename(path))[0]
+
+
 def render_file(traj_path: str, out_dir: str, index: int = 0,
                 frames: Sequence[int] | None = None,
                 fmt: str = "gif",
                 compare_path: str | None = None) -> tuple[str, str]:
   """Writes ``animation.<fmt>`` and ``frames.png`` for one trajectory, beside
-  the same trajectory of ``compare_path`` if given (the paper's Fig. 2: MPM
-  left, GNS right). ``frames`` of the grid default to the paper's (1, 80,
-  120, 180) that the trajectory has."""
+  the same trajectory of ``compare_path`` if given (the paper's Fig. 2),
+  each panel titled by its file's name (``truth``, ``predicted``). The
+  grid's ``frames`` default to six from the first to the last."""
   from experiments import figures  # pylint: disable=g-import-not-at-top
   t = _nth(traj_path, index)
   n = len(t.positions)
-  panels = [(f"MPM: {t.scene.name}", t.positions)]
+  panels = [(f"{_stem(traj_path)}: {t.scene.name}", t.positions)]
   if compare_path is not None:
     other = _nth(compare_path, index)
     if other.positions.shape != t.positions.shape:
       raise mpm.InputError(f"{compare_path}: trajectory {index} has shape "
                            f"{other.positions.shape}, {traj_path} has "
                            f"{t.positions.shape}")
-    panels.append(("GNS", other.positions))
+    panels.append((_stem(compare_path), other.positions))
   if frames is None:
-    frames = [f for f in (1, 80, 120, 180) if f < n]
+    frames = default_frames(n)
   elif not all(0 <= f < n for f in frames):
     raise mpm.InputError(f"frames {list(frames)}: {traj_path} trajectory "
                          f"{index} has {n} frames; allowed: comma-separated "

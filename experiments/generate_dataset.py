@@ -21,8 +21,9 @@ import tqdm
 from mpm import dataset
 from experiments import runtime
 
-_CONFIG = config_flags.DEFINE_config_file("config", None, "Config file.",
-                                          lock_config=True)
+_CONFIG = config_flags.DEFINE_config_file(
+    "config", None, "Config file (not needed with --verify).",
+    lock_config=True)
 _OUT = flags.DEFINE_string("out", None, "Dataset directory.")
 _WORKERS = flags.DEFINE_integer("workers", None,
                                 "Processes (default: the config's).",
@@ -47,6 +48,10 @@ def main(argv):
     print(f"{_OUT.value}: {'OK' if not problems else 'BROKEN'} "
           f"({len(problems)} problems)")
     sys.exit(1 if problems else 0)
+  if _CONFIG.value is None:
+    raise runtime.InputError("--config is required to generate (e.g. "
+                             "--config=experiments/configs/small.py); only "
+                             "--verify works without it")
   spec = dataset.DatasetSpec(**_CONFIG.value.dataset.to_dict())
   if _ASSEMBLE.value and _SHARD.value is not None:
     raise runtime.InputError(f"--shard={_SHARD.value} with --assemble; "
@@ -88,5 +93,5 @@ def _report(metadata):
 
 
 if __name__ == "__main__":
-  flags.mark_flags_as_required(["config", "out"])
+  flags.mark_flags_as_required(["out"])
   runtime.run(main)

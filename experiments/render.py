@@ -5,6 +5,8 @@
       --compare=ROLL/predicted.h5 --out=DIR    # MPM and GNS side by side
 """
 
+import shutil
+
 from absl import flags
 
 from experiments import runtime
@@ -15,16 +17,13 @@ _OUT = flags.DEFINE_string("out", None, "Output directory.")
 _INDEX = flags.DEFINE_integer("index", 0, "Which trajectory of the file.",
                               lower_bound=0)
 _FRAMES = flags.DEFINE_list(
-    "frames", None, "Frames of the PNG grid (default: those of the paper's "
-    "Figure 2, 1,80,120,180, that the trajectory has).")
+    "frames", None, "Frames of the PNG grid (default: six from the first "
+    "to the last, so the deposit is in the grid).")
 _FORMAT = flags.DEFINE_enum("format", "gif", ["gif", "mp4"],
                             "Animation format (mp4 needs ffmpeg).")
 _COMPARE = flags.DEFINE_string(
     "compare", None, "A second trajectory file (e.g. GNS predictions) drawn "
-    "beside --traj.")
-
-
-
+    "beside --traj; each panel is titled by its file's name.")
 
 def _check_frames(value: list[str] | None) -> bool:
   if value is not None and not (value and all(f.isdigit() for f in value)):
@@ -40,6 +39,10 @@ def main(argv):
   del argv
   runtime.existing_file("traj", _TRAJ.value)
   runtime.existing_file("compare", _COMPARE.value)
+  if _FORMAT.value == "mp4" and shutil.which("ffmpeg") is None:
+    raise runtime.InputError("--format=mp4 needs ffmpeg on PATH, which this "
+                             "machine lacks; allowed: --format=gif, or "
+                             "install ffmpeg")
   runtime.writable("out", _OUT.value)
   frames = None if _FRAMES.value is None else [int(f) for f in _FRAMES.value]
   for path in file_jobs.render_file(_TRAJ.value, _OUT.value, _INDEX.value,

@@ -3,6 +3,7 @@ it creates anything (and before any compilation: each row takes seconds)."""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -77,6 +78,8 @@ ROWS = (
     ("assemble_missing_parts", "experiments.generate_dataset",
      [TEST, "--out={d}", "--assemble"],
      "--assemble: 10 of 10 parts are missing in {d}/parts"),
+    ("generate_without_config", "experiments.generate_dataset",
+     ["--out={d}/out"], "--config is required to generate"),
     ("verify_missing", "experiments.generate_dataset",
      [TEST, "--out={d}/out", "--verify"],
      "--out={d}/out: no such directory"),
@@ -257,6 +260,11 @@ ROWS = (
     ("gradient_check_xs", "experiments.gradient_check",
      ["--out={d}/out", "--xs=0.52"],
      "--xs: [0.52] with --sigma=0.05: x +- sigma must lie in [0.5, 1.3] m"),
+    # Round 3, item 8: no silent GIF for an mp4 (where ffmpeg is missing).
+) + ((("render_mp4_without_ffmpeg", "experiments.render",
+       ["--traj={d}/traj.h5", "--out={d}/out", "--format=mp4"],
+       "--format=mp4 needs ffmpeg on PATH"),) if shutil.which("ffmpeg") is None
+     else ()) + (
     # Item 8: a stiffness above the bound is refused with its cost.
     ("simulate_too_stiff", "experiments.simulate",
      ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],

@@ -8,6 +8,7 @@ import numpy as np
 
 import mpm
 from experiments import figures
+from experiments import file_jobs
 
 SCENE = mpm.Scene.from_dict({
     "name": "pictures", "domain": {"width": 0.4, "height": 0.3},
@@ -35,6 +36,20 @@ class FiguresTest(absltest.TestCase):
                              os.path.join(self.dir, "f.png"))
     for path in (gif, png):
       self.assertGreater(os.path.getsize(path), 0, path)
+
+  def test_default_frames_reach_the_deposit(self):
+    self.assertEqual(file_jobs.default_frames(600), [0, 120, 240, 359, 479,
+                                                      599])
+    self.assertEqual(file_jobs.default_frames(3), [0, 1, 2])
+    self.assertEqual(file_jobs.default_frames(1), [0])
+
+  def test_mp4_without_ffmpeg_is_refused_not_renamed(self):
+    out = os.path.join(self.dir, "a.mp4")
+    with absltest.mock.patch.object(figures.shutil, "which",
+                                    return_value=None):
+      with self.assertRaisesRegex(mpm.InputError, "needs ffmpeg on PATH"):
+        figures.animate([("MPM", self.x)], SCENE, *self.boundary, out)
+    self.assertEmpty(os.listdir(self.dir))
 
   def test_frame_grid_draws_solids_in_metres_with_a_legend(self):
     scene = mpm.Scene.from_dict({**SCENE.to_dict(), "obstacles": [
