@@ -49,8 +49,9 @@ FLAGS = flags.FLAGS
 BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch", "gpu")
 GPU_PARTS = gpu_benchmark.PARTS + ("report",)
 
-_OUT = flags.DEFINE_string("out", "docs/benchmarks",
-                           "Directory for the JSON and Markdown results.")
+_OUT = flags.DEFINE_string(
+    "out", "out/benchmarks", "Directory for the JSON and Markdown results "
+    "(--out=docs/benchmarks replaces the committed figures).")
 _WHAT = flags.DEFINE_list("what", ["mpm", "gns"],
                           "Benchmarks to run, comma-separated subset of "
                           f"{', '.join(BENCHMARKS)}.")
