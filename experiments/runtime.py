@@ -149,8 +149,7 @@ def cap_cpu_isa() -> None:
   loaded from the compilation cache log no false feature mismatch.
 
   XLA reads ``$XLA_FLAGS`` once, when jax starts its backend: this has no
-  effect after the first computation (or an import of jax_md, which starts
-  it), and is then left out, so that child processes compile as this one.
+  effect after the first computation, and is then left out, so that child processes compile as this one.
   ``experiments/__init__.py`` calls it, before any entry point's imports.
   """
   flags_now = os.environ.get("XLA_FLAGS", "")

@@ -322,8 +322,8 @@ def initialize(s: Settings, timeout_s: int = 300) -> None:
     return
   from jax._src import xla_bridge  # pylint: disable=g-import-not-at-top
   if xla_bridge.backends_are_initialized():
-    # A bug, not bad input: something (e.g. importing jax_md, which
-    # gnsjax.graph does) touched a device first.
+    # A bug, not bad input: something (a computation, or a module that
+    # computes at import) touched a device first.
     raise RuntimeError("distributed.initialize: JAX's backend is already "
                        "initialised; call it before importing gnsjax.train")
   jax.config.update("jax_cpu_collectives_implementation", "gloo")

@@ -52,10 +52,11 @@ from typing import Callable, Sequence, Set, Tuple
 
 from absl import logging
 import jax
-from jax_md import partition
-from jax_md import space
 import jax.numpy as jnp
 import numpy as np
+
+from gnsjax.neighbors import partition
+from gnsjax.neighbors import space
 
 # Parking sites are this many radii apart and at least this far below the
 # domain: more than 2R from each other and from the domain, so a site is more

@@ -6,8 +6,7 @@ import os
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 # The cache, set in the environment: the entry points and scripts the tests
-# run as subprocesses share it too, from their first import on (jax_md
-# compiles ~120 programs when imported).
+# run as subprocesses share it too.
 _CACHE = os.path.join(os.path.dirname(os.path.dirname(__file__)), ".jax_cache")
 os.environ.update(JAX_COMPILATION_CACHE_DIR=_CACHE,
                   JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",

@@ -5,9 +5,9 @@ tests.experiments.forked``; ``Server`` starts and drives it).
 A fresh ``python -m`` of an entry point spends 1-8 CPU seconds importing
 jax, flax, orbax, matplotlib and the project before it reads its first flag;
 a fork of this server starts with them imported. Each run is still a new
-process, forked before jax's backend starts (nothing here starts it:
-``PRELOAD`` leaves out jax_md, which does at import, and whatever imports
-it), running the module as ``python -m`` does (``runpy``, ``__main__``),
+process, forked before jax's backend starts (nothing in ``PRELOAD`` starts it,
+which the server checks; jax_md is imported without its ``__init__``,
+``gnsjax/neighbors.py``), running the module as ``python -m`` does (``runpy``, ``__main__``),
 with its own argv, stdout and stderr, and the same exit code: sys.exit's, 1
 after an uncaught exception (shown by ``sys.excepthook``).
 
@@ -33,7 +33,14 @@ PRELOAD = (
     "ml_collections.config_flags", "mpm", "mpm.dataset", "mpm.io",
     "mpm.sampler", "gnsjax.checkpoint", "gnsjax.data", "gnsjax.distributed",
     "gnsjax.features", "gnsjax.metrics", "gnsjax.models",
-    "gnsjax.simulator", "experiments.runtime", "experiments.file_jobs",
+    "gnsjax.simulator", "gnsjax.graph", "gnsjax.batching", "gnsjax.rollout",
+    "gnsjax.run", "gnsjax.train", "gnsjax.config", "gnsjax.design.scenes",
+    "experiments.studies.evaluation", "experiments.studies.stability",
+    "experiments.studies.tradeoff", "experiments.studies.convergence",
+    "experiments.studies.design", "experiments.studies.design_comparison",
+    "experiments.studies.gradient_check", "experiments.studies.calibration",
+    "experiments.studies.ablation", "experiments.studies.demo",
+    "experiments.runtime", "experiments.file_jobs",
     "experiments.figures", "experiments.configs.paper",
     "experiments.configs.small", "experiments.configs.test",
     "experiments.timing", "experiments.studies.settings",
