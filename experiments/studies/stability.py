@@ -146,6 +146,10 @@ def _obstacle(shape: str, x: float, end: str) -> dict:
 # A straight incline of 15 degrees under the sand box (not a training
 # ramp), and three obstacles (training scenes have at most two).
 INCLINE = {"kind": "polyline", "points": [[0.0, 0.03], [1.65, 0.47]]}
+# 30 deg, twice the training ramps' steepest; the sand's box starts above it.
+STEEP_INCLINE = {"kind": "polyline",
+                 "points": [[0.0, 0.03], [1.65, 0.03 + 1.65 * math.tan(
+                     math.radians(30))]]}
 THREE = [_obstacle("semicircle", 0.6, "max"),
          {"shape": "rectangle", "x": 0.85, "width": 0.04, "height": 0.05},
          _obstacle("triangle", 1.1, "min")]
@@ -216,6 +220,10 @@ def gns_cases(spacing: float) -> list[Case]:
            start_frame=60, learned_steps=2000),
       Case("gns_straight_incline", "gns", "a straight 15 deg incline",
            lambda: small(ramp=INCLINE)),
+      Case("gns_straight_incline_30", "gns", "a straight 30 deg incline",
+           lambda: _scene(ramp=STEEP_INCLINE, granular={
+               "spacing": spacing, "num_particles": 250,
+               "box": [1.25, 0.9, 1.46, 1.19]})),
       Case("gns_three_obstacles", "gns", "three obstacles",
            lambda: small(obstacles=THREE)),
       Case("gns_particles_100", "gns", "100 particles",
@@ -229,7 +237,8 @@ def gns_cases(spacing: float) -> list[Case]:
 
 def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
          frames: int, wall: float, error: str | None = None,
-         error_frame: int | None = None) -> dict:
+         error_frame: int | None = None,
+         against_mpm: dict | None = None) -> dict:
   n = 0 if scene is None else len(mpm.granular_particles(scene))
   status = ("refused" if error and scene is None else
             "broken" if error or not check.ok else "ok")
@@ -250,7 +259,30 @@ def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
       "rest_time_s": "" if check is None else round(check.rest_time, 3),
       "creep_mm_s": "" if check is None else round(1e3 * check.creep, 3),
       "wall_time_s": round(wall, 1),
+      **(against_mpm or dict.fromkeys(AGAINST_MPM, "")),
   }
+
+
+# The learned rows' comparison with the MPM on the same scene and frames.
+AGAINST_MPM = ("mpm_final_speed_m_s", "mpm_rest_time_s", "travel_ratio")
+
+
+def against_mpm(learned: np.ndarray, mpm_positions: np.ndarray,
+                start: np.ndarray, frames: np.ndarray,
+                scene: mpm.Scene) -> dict:
+  """The MPM's speed at the end and rest time on the same stored frames,
+  and the learned front's travel from ``start`` [N, 2] over the MPM's.
+
+  Args:
+    learned, mpm_positions: [T, N, 2] sand (m) at stored ``frames`` [T].
+  """
+  check = check_frames(mpm_positions, frames, scene)
+  travel = [float(metrics.runout(x[-1]) - metrics.runout(start))
+            for x in (learned, mpm_positions)]
+  return {"mpm_final_speed_m_s": round(check.final_speed, 4),
+          "mpm_rest_time_s": round(check.rest_time, 3),
+          "travel_ratio": round(travel[0] / travel[1], 3)
+                          if abs(travel[1]) > 1e-9 else ""}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -305,8 +337,14 @@ def run_gns(case: Case, run: run_lib.Run) -> Outcome:
   wall = time.perf_counter() - begin
   frames = window_end + k * np.arange(1, steps + 1)
   check = check_frames(out.positions, frames, scene)
-  return Outcome(_row(case, scene, check, int(frames[-1]), wall), scene,
-                 out.positions, frames)
+  # The MPM on the same scene over the same frames, for the comparison.
+  reference = mpm.simulate(dataclasses.replace(
+      scene, num_frames=int(frames[-1]) + 1))
+  compared = against_mpm(out.positions,
+                         np.asarray(reference.positions)[frames],
+                         t.positions[0], frames, scene)
+  return Outcome(_row(case, scene, check, int(frames[-1]), wall,
+                      against_mpm=compared), scene, out.positions, frames)
 
 
 def picture(outcome: Outcome, path: str) -> str | None:
@@ -328,8 +366,9 @@ def report(summary: dict[str, Any]) -> str:
   lines = ["| case | what it pushes | particles | frames | status | first "
            "bad frame: what | max inside solids | max outside | max speed "
            "(m/s) | mean speed at the end (m/s) | at rest from (s) | creep "
-           "after (mm/s) | wall (s) |",
-           "|---" * 13 + "|"]
+           "after (mm/s) | wall (s) | MPM: speed at the end (m/s) | MPM: "
+           "at rest from (s) | front travel / MPM's |",
+           "|---" * 16 + "|"]
   for r in summary["rows"]:
     bad = (f"{r['break_frame']}: {r['what']}" if r["break_frame"] != "" else
            r["what"])
@@ -341,7 +380,10 @@ def report(summary: dict[str, Any]) -> str:
                  f"{r['frames']} | {r['status']} | {bad} | {inside} | "
                  f"{outside} | {r['max_speed_m_s']} | "
                  f"{r['final_speed_m_s']} | {r.get('rest_time_s', '')} | "
-                 f"{r.get('creep_mm_s', '')} | {r['wall_time_s']} |")
+                 f"{r.get('creep_mm_s', '')} | {r['wall_time_s']} | "
+                 f"{r.get('mpm_final_speed_m_s', '')} | "
+                 f"{r.get('mpm_rest_time_s', '')} | "
+                 f"{r.get('travel_ratio', '')} |")
   return "\n".join(lines) + "\n"
 
 

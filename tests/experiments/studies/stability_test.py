@@ -102,6 +102,31 @@ class CasesTest(absltest.TestCase):
       # The grid follows the particle spacing (2 particles per cell side).
       self.assertAlmostEqual(scene.dx, 2 * scene.granular.spacing)
 
+  def test_every_gns_case_builds_with_its_sand_above_the_ramp(self):
+    for case in stability.gns_cases(0.01):
+      try:
+        scene = case.scene()
+      except mpm.InputError as e:
+        self.fail(f"{case.name}: {e}")
+      sand = mpm.granular_particles(scene)
+      self.assertBetween(len(sand), 100, 250, case.name)
+      self.assertEqual(stability.metrics.inside_solids(sand[None], scene)[0],
+                       0.0, case.name)
+
+  def test_learned_rows_against_the_mpm(self):
+    frames = np.arange(6)
+    start = _resting(1)[0]
+    mpm_run = _resting(6)
+    mpm_run[1:] -= [0.2, 0.0]          # slides 20 cm, then rests
+    learned = _resting(6)
+    learned[1:] -= [0.1, 0.0]          # 10 cm, then creeps 1 mm per frame
+    learned[1:] -= np.arange(5)[:, None, None] * [0.001, 0.0]
+    row = stability.against_mpm(learned, mpm_run, start, frames, SCENE)
+    self.assertEqual(row["mpm_final_speed_m_s"], 0.0)
+    self.assertEqual(row["mpm_rest_time_s"], round(SCENE.frame_dt, 3))
+    self.assertAlmostEqual(row["travel_ratio"], 0.104 / 0.2, places=3)
+    self.assertEqual(set(row), set(stability.AGAINST_MPM))
+
   def test_rows_of_a_run_a_blow_up_and_a_refused_scene(self):
     outcome = stability.run_mpm(stability.Case("tiny", "mpm", "",
                                                lambda: SCENE))
