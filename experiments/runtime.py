@@ -21,6 +21,7 @@ import jax
 from jax._src import xla_bridge  # no public backends_are_initialized
 
 import mpm
+from experiments import config_files
 from experiments.studies import settings as settings_lib
 from mpm import io as mpm_io
 
@@ -65,10 +66,20 @@ def _non_finite_floats() -> list[str]:
 def _parse_flags(argv: list[str]) -> list[str]:
   # --verbose shows in every entry point's --help, beside its own flags.
   flags.FLAGS.register_key_flag_for_module(sys.argv[0], flags.FLAGS["verbose"])
+  verbose = "--verbose" in argv
+  # ml_collections reports a bad config file or override in a traceback
+  # (a missing file only once the config is read): one line instead.
+  problem = config_files.check_files(flags.FLAGS, argv)
+  if problem and not verbose:
+    _refuse(InputError(problem))
   try:
     rest = flags.FLAGS(argv)
   except flags.Error as e:  # unknown flag, bad value, failed validator
     _refuse(e)
+  except Exception as e:  # pylint: disable=broad-except
+    if verbose or not config_files.is_involved(flags.FLAGS, argv):
+      raise
+    _refuse(InputError(config_files.explain(flags.FLAGS, argv, e)))
   bad = _non_finite_floats()
   if bad:
     _refuse(InputError(f"{', '.join(sorted(set(bad)))}: allowed: a finite "

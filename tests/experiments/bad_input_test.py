@@ -265,6 +265,21 @@ ROWS = (
        ["--traj={d}/traj.h5", "--out={d}/out", "--format=mp4"],
        "--format=mp4 needs ffmpeg on PATH"),) if shutil.which("ffmpeg") is None
      else ()) + (
+    # Round 3, item 4: config files and overrides, in one line.
+    ("train_config_missing", "experiments.train",
+     ["--config={d}/missing.py", "--data={d}/ds", "--workdir={d}/out"],
+     "--config={d}/missing.py: no such file"),
+    ("generate_config_syntax", "experiments.generate_dataset",
+     ["--config={d}/syntax.py", "--out={d}/out"],
+     "--config={d}/syntax.py: {d}/syntax.py, line 2: invalid syntax"),
+    ("train_config_override_typo", "experiments.train",
+     [TEST, "--config.train.num_step=5", "--data={d}/ds",
+      "--workdir={d}/out"],
+     "--config.train.num_step=5: config.train has no field 'num_step'; did "
+     "you mean config.train.num_steps?"),
+    ("generate_config_section_typo", "experiments.generate_dataset",
+     [TEST, "--config.datset.spacing=0.02", "--out={d}/out"],
+     "config has no field 'datset'; did you mean config.dataset?"),
     # Item 8: a stiffness above the bound is refused with its cost.
     ("simulate_too_stiff", "experiments.simulate",
      ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],
@@ -294,6 +309,8 @@ class BadInputTest(parameterized.TestCase):
         np.zeros(1, np.int32), scene)])
     with open(os.path.join(d, "a_file"), "w") as f:
       f.write("not a directory")
+    with open(os.path.join(d, "syntax.py"), "w") as f:
+      f.write("def get_config():\n  return {'a': 1,,}\n")
     # A directory that passes --data's check (the training rows fail later).
     os.makedirs(os.path.join(d, "ds"))
     with open(os.path.join(d, "ds", "train.h5"), "w") as f:
