@@ -12,13 +12,17 @@ Across processes or hosts sharing a filesystem (docs/scaling.md): run
 once ``--assemble``; the dataset is the one a single run writes.
 """
 
+import os
+import shutil
 import sys
 
 from absl import flags
 from ml_collections import config_flags
 import tqdm
 
+from mpm import budget
 from mpm import dataset
+from mpm import sampler
 from experiments import runtime
 
 _CONFIG = config_flags.DEFINE_config_file(
@@ -57,6 +61,9 @@ def main(argv):
     raise runtime.InputError(f"--shard={_SHARD.value} with --assemble; "
                              "allowed: one of them")
   shard = None if _SHARD.value is None else dataset.Shard.parse(_SHARD.value)
+  workers = _WORKERS.value or _CONFIG.value.workers
+  if not _ASSEMBLE.value:
+    _check_budget(spec, workers, shard)
   runtime.writable("out", _OUT.value)
   dataset.check_target(spec, _OUT.value)
   if _ASSEMBLE.value:
@@ -64,7 +71,6 @@ def main(argv):
     metadata = dataset.assemble_parts(spec, _OUT.value)
     _report(metadata)
     return
-  workers = _WORKERS.value or _CONFIG.value.workers
   total = (spec.num_train + spec.num_test if shard is None else
            len(shard.take(dataset.plan(spec))))
   cache = runtime.enable_compilation_cache()
@@ -82,6 +88,36 @@ def main(argv):
           "run once with --assemble")
     return
   _report(metadata)
+
+
+def _check_budget(spec, workers, shard):
+  """Refuses a dataset whose largest scene cannot fit this machine's memory
+  once per worker, or whose files cannot fit the disk; warns, with the
+  estimate, if it takes hours."""
+  largest = max(sampler.PARTICLE_RANGE + dataset.TEST_PARTICLES)
+  scene = sampler.sample_scene(0, num_particles=spec.particles(largest),
+                               num_frames=spec.num_frames,
+                               spacing=spec.spacing)
+  count = spec.num_train + spec.num_test
+  if shard is not None:
+    count = -(-count // shard.count)
+  workers = min(workers, count)
+  cost = budget.check_fits(scene, scenes=workers, names={
+      "spacing": "dataset.spacing", "dx": None,
+      "num_frames": "dataset.num_frames", "scenes": "--workers"})
+  disk = count * spec.num_frames * cost.particles * 8  # float32 x, y
+  parent = os.path.abspath(_OUT.value)
+  while not os.path.exists(parent):
+    parent = os.path.dirname(parent)
+  free = shutil.disk_usage(parent).free
+  if disk > free:
+    raise runtime.InputError(
+        f"dataset: {count:,} trajectories of {spec.num_frames:,} frames and "
+        f"up to {cost.particles:,} particles take up to "
+        f"{budget.gib(disk)}; {parent} has {budget.gib(free)} free")
+  warning = budget.warning(cost, count, workers)
+  if warning:
+    print(warning, file=sys.stderr)
 
 
 def _report(metadata):

@@ -4,12 +4,15 @@
   python -m experiments.simulate --seed=7 --out=traj.h5   # a Table 1 scene
 """
 
+import sys
+
 from absl import app
 from absl import flags
 from absl import logging
 import jax
 
 import mpm
+from mpm import budget
 from experiments import runtime
 from experiments import file_jobs
 
@@ -32,6 +35,11 @@ def main(argv):
   else:
     scene = mpm.Scene.load(runtime.existing_file("scene", _SCENE.value))
     seed = -1
+  # Before any work: what cannot fit this machine's memory is refused, what
+  # takes hours said (with the estimate).
+  cost = budget.check_fits(scene, chunk_frames=_CHUNK.value)
+  if budget.warning(cost):
+    print(budget.warning(cost), file=sys.stderr)
   # Before minutes of simulating: the file must be writable at the end.
   runtime.writable("out", _OUT.value, directory=False)
   runtime.enable_compilation_cache()

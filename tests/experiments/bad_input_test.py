@@ -44,7 +44,9 @@ def server() -> forked.Server:
 
 # (name, module, argv, expected in the message). In argv, {d} is a fresh
 # directory holding: tiny.json (a valid tiny scene), stiff.json (the same
-# with E = 1e12 Pa), bad.json (an unknown obstacle shape), traj.h5 (a
+# with E = 1e12 Pa), bad.json (an unknown obstacle shape), fine.json (the
+# paper's box at a 20 um spacing), long.json (10^8 frames), syntax.py (a
+# config file with a syntax error on line 2), traj.h5 (a
 # 3-frame trajectory), a_file (a plain file), ds/train.h5 (what --data
 # needs), other/metadata.json (a finished dataset of another config),
 # parts/parts/spec.json (an unfinished one). No
@@ -280,6 +282,28 @@ ROWS = (
     ("generate_config_section_typo", "experiments.generate_dataset",
      [TEST, "--config.datset.spacing=0.02", "--out={d}/out"],
      "config has no field 'datset'; did you mean config.dataset?"),
+    # Round 3, item 1: absurd sizes, refused before any work with the
+    # estimate and what fits (the paper's box at 20 um: 3.6 TB).
+    ("simulate_spacing_too_fine", "experiments.simulate",
+     ["--scene={d}/fine.json", "--out={d}/out/traj.h5"],
+     "granular.spacing = 2e-05, num_frames = 600: 362,250,000 particles"),
+    ("simulate_too_many_frames", "experiments.simulate",
+     ["--scene={d}/long.json", "--out={d}/out/traj.h5"],
+     "num_frames = 100,000,000: 1,000 particles"),
+    ("generate_spacing_too_fine", "experiments.generate_dataset",
+     [TEST, "--config.dataset.spacing=0.00002", "--out={d}/out"],
+     "dataset.spacing = 2e-05, dataset.num_frames = 20: 93,750,000 "
+     "particles"),
+    ("generate_too_many_frames", "experiments.generate_dataset",
+     [TEST, "--config.dataset.num_frames=100000000", "--out={d}/out"],
+     "allowed: what fits, e.g. dataset.num_frames <= "),
+    ("generate_too_many_workers", "experiments.generate_dataset",
+     [TEST, "--config.dataset.num_train=100000", "--workers=100000",
+      "--out={d}/out"], "allowed: what fits, e.g. --workers <= "),
+    ("generate_too_large_for_the_disk", "experiments.generate_dataset",
+     [TEST, "--config.dataset.num_train=1000000000", "--out={d}/out"],
+     "dataset: 1,000,000,007 trajectories of 20 frames and up to 375 "
+     "particles take up to"),
     # Item 8: a stiffness above the bound is refused with its cost.
     ("simulate_too_stiff", "experiments.simulate",
      ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],
@@ -300,6 +324,9 @@ class BadInputTest(parameterized.TestCase):
     for name, scene in (
         ("tiny", tiny),
         ("stiff", {**tiny, "material": {"youngs_modulus": 1e12}}),
+        ("fine", {"granular": {"box": [1.25, 0.5, 1.46, 1.19],
+                               "spacing": 0.00002}}),
+        ("long", {"num_frames": 100_000_000}),
         ("bad", {**tiny, "obstacles": [{"shape": "hexagon", "x": 0.2}]})):
       with open(os.path.join(d, f"{name}.json"), "w") as f:
         json.dump(scene, f)
