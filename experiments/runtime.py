@@ -44,6 +44,13 @@ flags.disclaim_key_flags()
 
 def _refuse(error: Exception) -> None:
   print(f"error: {error}", file=sys.stderr)
+  if getattr(error, "exit_at_once", False) or getattr(
+      error.__cause__, "exit_at_once", False):
+    # Reads left pending in other threads (orbax's, of a damaged
+    # checkpoint) would print 'Event loop is closed' tracebacks at exit.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(EXIT_BAD_INPUT)  # pylint: disable=protected-access
   sys.exit(EXIT_BAD_INPUT)
 
 
@@ -97,9 +104,17 @@ def run(main: Callable[[list[str]], None]) -> None:
     try:
       return main(argv)
     except BAD_INPUT as e:
+      _remove_created()
       if _VERBOSE.value:
         raise
       _refuse(e)
+    except SystemExit as e:
+      if e.code not in (None, 0):
+        _remove_created()
+      raise
+    except BaseException:
+      _remove_created()
+      raise
   app.run(checked, flags_parser=_parse_flags)
 
 
@@ -119,7 +134,23 @@ def existing_dir(flag: str, path: str, holding: str = "") -> str:
     present = sorted(os.listdir(path))[:8]
     raise InputError(f"--{flag}={path}: no {holding} in it (it holds "
                      f"{present})")
+  if holding == "checkpoints":
+    _latest_checkpoint_intact(flag, path)
   return path
+
+
+def _latest_checkpoint_intact(flag: str, workdir: str) -> None:
+  """InputError naming ``--flag`` if the run's latest checkpoint (the one
+  loaded) is missing files, before anything is created."""
+  from gnsjax import checkpoint  # pylint: disable=g-import-not-at-top
+  root = os.path.join(workdir, "checkpoints")
+  steps = [int(n) for n in os.listdir(root) if n.isdigit()]
+  if not steps:
+    raise InputError(f"--{flag}={workdir}: no checkpoint in {root}")
+  try:
+    checkpoint.check_intact(root, max(steps))
+  except checkpoint.DamagedCheckpointError as e:
+    raise InputError(f"--{flag}={workdir}: {e}") from e
 
 
 def writable(flag: str, path: str, *, directory: bool = True) -> str:
@@ -139,7 +170,40 @@ def writable(flag: str, path: str, *, directory: bool = True) -> str:
     raise InputError(f"--{flag}={path}: {parent} is a file, not a directory")
   if not os.access(parent, os.W_OK | os.X_OK):
     raise InputError(f"--{flag}={path}: {parent} is not writable")
+  # What this run would create: removed if it fails (run's cleanup).
+  created = os.path.abspath(path)
+  while not os.path.exists(os.path.dirname(created)):
+    created = os.path.dirname(created)
+  if not os.path.exists(created):
+    _CREATED.append(created)
   return path
+
+
+# Outputs that did not exist when checked (``writable``): a run that fails
+# removes them, unless they hold what a rerun resumes from.
+_CREATED: list[str] = []
+
+
+def _resumable(path: str) -> bool:
+  """Whether ``path`` holds a checkpoint (a training, the ablation's) or a
+  finished part of a dataset, which the same command continues from."""
+  for folder, dirs, files in os.walk(path):
+    name = os.path.basename(folder)
+    if ((name == "checkpoints" and any(d.isdigit() for d in dirs)) or
+        (name == "parts" and files)):
+      return True
+  return False
+
+
+def _remove_created() -> None:
+  import shutil  # pylint: disable=g-import-not-at-top
+  for path in _CREATED:
+    if _resumable(path):
+      continue
+    if os.path.isdir(path):
+      shutil.rmtree(path, ignore_errors=True)
+    elif os.path.exists(path):
+      os.remove(path)
 
 
 # XLA:CPU (jaxlib 0.10.1) adds the tuning features +prefer-no-gather and

@@ -403,6 +403,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
     raise InputError(f"train.batch_size = {tcfg.batch_size} must be a "
                      f"multiple of the {jax.device_count()} devices")
   lead = jax.process_index() == 0  # writes the logs
+  if jax.process_count() == 1:
+    # Resume from the newest intact checkpoint, never a damaged one.
+    checkpoint.set_aside_damaged(workdir)
   mngr = checkpoint.manager(workdir, cfg.checkpoint.every_steps,
                             cfg.checkpoint.named_steps, cfg.checkpoint.keep)
   config_dict = config_lib.config_dict(config)

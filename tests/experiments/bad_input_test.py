@@ -1,6 +1,7 @@
 """Every entry point refuses bad input in one line with exit code 2, before
 it creates anything (and before any compilation: each row takes seconds)."""
 
+import glob
 import json
 import os
 import shutil
@@ -46,7 +47,8 @@ def server() -> forked.Server:
 # directory holding: tiny.json (a valid tiny scene), stiff.json (the same
 # with E = 1e12 Pa), bad.json (an unknown obstacle shape), fine.json (the
 # paper's box at a 20 um spacing), long.json (10^8 frames), syntax.py (a
-# config file with a syntax error on line 2), traj.h5 (a
+# config file with a syntax error on line 2), damaged/ (a run whose
+# checkpoint lost its data files), traj.h5 (a
 # 3-frame trajectory), a_file (a plain file), ds/train.h5 (what --data
 # needs), other/metadata.json (a finished dataset of another config),
 # parts/parts/spec.json (an unfinished one). No
@@ -304,6 +306,19 @@ ROWS = (
      [TEST, "--config.dataset.num_train=1000000000", "--out={d}/out"],
      "dataset: 1,000,000,007 trajectories of 20 frames and up to 375 "
      "particles take up to"),
+    # Round 3, item 5: a checkpoint whose data files were deleted.
+    ("evaluate_damaged_checkpoint", "experiments.evaluate",
+     ["--workdir={d}/damaged", "--data={d}", "--out={d}/out"],
+     "--workdir={d}/damaged: checkpoint {d}/damaged/checkpoints/9000 is "
+     "damaged: state/ocdbt.process_0/d/* (the arrays' data) missing"),
+    ("rollout_damaged_checkpoint", "experiments.rollout",
+     ["--workdir={d}/damaged", "--data={d}", "--out={d}/out"],
+     "checkpoint {d}/damaged/checkpoints/9000 is damaged"),
+    ("average_runs_damaged_checkpoint", "experiments.average_runs",
+     ["--workdirs=experiments/pretrained/small,{d}/damaged",
+      "--out={d}/out"],
+     "--workdirs={d}/damaged: checkpoint {d}/damaged/checkpoints/9000 is "
+     "damaged"),
     # Item 8: a stiffness above the bound is refused with its cost.
     ("simulate_too_stiff", "experiments.simulate",
      ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],
@@ -336,6 +351,12 @@ class BadInputTest(parameterized.TestCase):
         np.zeros(1, np.int32), scene)])
     with open(os.path.join(d, "a_file"), "w") as f:
       f.write("not a directory")
+    # The shipped model with its arrays' data files deleted.
+    shutil.copytree(os.path.join(ROOT, "experiments", "pretrained", "small"),
+                    os.path.join(d, "damaged"))
+    for path in glob.glob(os.path.join(d, "damaged", "checkpoints", "9000",
+                                       "state", "ocdbt.process_0", "d", "*")):
+      os.remove(path)
     with open(os.path.join(d, "syntax.py"), "w") as f:
       f.write("def get_config():\n  return {'a': 1,,}\n")
     # A directory that passes --data's check (the training rows fail later).
