@@ -9,6 +9,11 @@ same command plus ``--coordinator=HOST0:PORT --num_processes=N
 ``--data`` and ``--workdir`` must be on a shared filesystem.
 """
 
+import contextlib
+import os
+import socket
+import time
+
 from absl import flags
 from absl import logging
 import jax
@@ -16,6 +21,7 @@ from ml_collections import config_flags
 
 from experiments import runtime
 from gnsjax import distributed
+from mpm import workers
 # gnsjax.train and gnsjax.config are imported in main, after the distributed
 # runtime starts: importing them (jax_md) initialises JAX's backend.
 
@@ -47,6 +53,38 @@ def main(argv):
   distributed.check_supported(_CONFIG.value, processes.num_processes)
   runtime.existing_dir("data", _DATA.value, holding="train.h5")
   runtime.writable("workdir", _WORKDIR.value)
+  if processes.process_id:  # process 0 holds the run directory's lock
+    _train(processes)
+    return
+  with _one_trainer(_WORKDIR.value):
+    _train(processes)
+
+
+@contextlib.contextmanager
+def _one_trainer(workdir):
+  """Holds ``workdir/trainer.lock`` (an flock, released by the kernel
+  however this process dies), naming this process in it; a second trainer
+  into the same directory is refused, naming the first."""
+  path = os.path.join(workdir, "trainer.lock")
+  holder = ""
+  if os.path.exists(path):
+    with open(path) as f:
+      holder = f.read().strip()
+  os.makedirs(workdir, exist_ok=True)
+  try:
+    with workers.locked(path, ""):
+      with open(path, "w") as f:
+        f.write(f"pid {os.getpid()} on host {socket.gethostname()}, started "
+                f"{time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+      yield
+  except workers.GeneratorBusyError:
+    raise runtime.InputError(
+        f"--workdir={workdir}: another trainer is running in it "
+        f"({holder or 'its pid unknown'}); wait for it to finish (or stop "
+        "it), or use another --workdir") from None
+
+
+def _train(processes):
   distributed.handshake(processes, _COORDINATOR_WAIT_S.value,
                         _INIT_TIMEOUT_S.value)
   runtime.enable_compilation_cache()

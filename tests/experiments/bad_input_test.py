@@ -391,6 +391,37 @@ class BadInputTest(parameterized.TestCase):
     self.assertEqual(os.listdir(os.path.join(self.dir, "parts", "parts")),
                      ["spec.json"])
 
+  def test_one_trainer_per_run_directory(self):
+    # Round 3, item 6: a trainer holds the run directory (here a process
+    # that takes the trainer's lock and waits: no training is needed).
+    workdir = os.path.join(self.dir, "locked_run")
+    env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu")
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time\n"
+         "from experiments import train\n"
+         "with train._one_trainer(sys.argv[1]):\n"
+         "  print('locked', flush=True)\n"
+         "  time.sleep(120)\n", workdir],
+        env=env, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    self.addCleanup(holder.kill)
+    self.assertEqual(holder.stdout.readline().strip(), "locked")
+    argv = (TEST, f"--data={self.dir}/ds", f"--workdir={workdir}")
+    code, _, stderr = self.server.run("experiments.train", *argv)
+    self.assertEqual(code, 2, stderr)
+    self.assertEqual(len(stderr.strip().splitlines()), 1, stderr)
+    self.assertIn(f"--workdir={workdir}: another trainer is running in it "
+                  f"(pid {holder.pid} on host ", stderr)
+    self.assertEqual(os.listdir(workdir), ["trainer.lock"])
+    # Killed with -9, it holds nothing: the rerun gets past the lock (and
+    # fails later, on the dataset that is not one).
+    holder.kill()
+    holder.wait()
+    code, _, stderr = self.server.run("experiments.train", *argv)
+    self.assertEqual(code, 2, stderr)
+    self.assertNotIn("another trainer", stderr)
+    self.assertIn("train.h5", stderr)
+
   def test_verbose_shows_the_traceback(self):
     code, _, stderr = run("experiments.simulate",
                           f"--scene={self.dir}/bad.json",
