@@ -306,6 +306,10 @@ ROWS = (
      [TEST, "--config.dataset.num_train=1000000000", "--out={d}/out"],
      "dataset: 1,000,000,007 trajectories of 20 frames and up to 375 "
      "particles take up to"),
+    # Round 3, item 7: a run failing on its data removes what it created.
+    ("train_unreadable_dataset", "experiments.train",
+     [TEST, "--data={d}/ds", "--workdir={d}/out"],
+     "{d}/ds/train.h5: not a readable HDF5 file"),
     # Round 3, item 5: a checkpoint whose data files were deleted.
     ("evaluate_damaged_checkpoint", "experiments.evaluate",
      ["--workdir={d}/damaged", "--data={d}", "--out={d}/out"],
