@@ -100,12 +100,13 @@ class TwoProcessTrainingTest(fixtures.TinyRunTestCase):
     codes = [p.wait(timeout=600) for p in procs]
     self.assertEqual(codes, [0, 0], _tail(self.dir))
     self.assert_losses_equal(_losses(workdir), want)
-    # One log, one checkpoint (written once, by both processes' orbax).
+    # One log, one checkpoint (written once, by both processes' orbax), one
+    # trainer's lock (process 0's).
     self.assertEqual(os.listdir(os.path.join(workdir, "checkpoints")), ["2"])
     self.assertCountEqual(
         os.listdir(workdir),
         ["checkpoints", "config.json", "metrics.csv", "stats.json",
-         "tensorboard"])
+         "tensorboard", "trainer.lock"])
 
   @pytest.mark.slow
   def test_kill_9_of_one_process_then_restart_of_both_resumes_exactly(self):

@@ -18,7 +18,10 @@ class OpProfileTest(absltest.TestCase):
       return jax.ops.segment_sum(jnp.exp(g), idx, 3)  # scatter
 
     args = (jnp.ones((3, 64)), jnp.ones((64, 64)))
-    compiled = jax.jit(fn).lower(*args).compile()
+    # As production compiles it: the suite's classic emitters
+    # (tests/conftest.py) would fuse the scatter into a loop.
+    compiled = jax.jit(fn).lower(*args).compile(
+        {"xla_cpu_use_fusion_emitters": True})
     kinds = set(op_profile.classify(compiled.as_text()).values())
     self.assertContainsSubset({"dense", "scatter"}, kinds)
     out = op_profile.breakdown(compiled, lambda: compiled(*args), repeats=1)
