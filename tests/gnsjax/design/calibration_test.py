@@ -58,8 +58,8 @@ class CalibrationTest(absltest.TestCase):
 
   def test_cmaes_recovers_the_hidden_values(self):
     result = calibration.calibrate("cmaes", self.problem, START,
-                                   budget=baselines.Budget(160))
-    self.assertLen(result["trace"], 160)
+                                   budget=baselines.Budget(96))
+    self.assertLen(result["trace"], 96)
     best = min(result["trace"], key=lambda r: r["value"])
     angle, basal = best["vector"]
     self.assertLess(abs(angle - TRUTH[0]), 1.0)
