@@ -83,13 +83,16 @@ class DemoTest(absltest.TestCase):
   def test_demo(self):
     # As `make demo` runs it (the entry point), on a tiny default. The small
     # config learns steps of 3 frames from 6 inputs: windows of 19 frames;
-    # 22 leave two learned steps after frame 15 (18 and 21).
+    # 22 leave two learned steps after frame 15 (18 and 21). One dataset
+    # worker: a second would import jax and compile the MPM again (workers
+    # in parallel: tests/mpm/dataset_test.py, generate(workers=2)).
     tmp = tempfile.TemporaryDirectory()
     self.addCleanup(tmp.cleanup)
     out_dir = os.path.join(tmp.name, "demo")
     out = entry_points_test.run(
         "experiments.demo", f"--out={out_dir}", "--num_frames=22",
-        "--num_train=2", "--finetune_steps=2", "--nopretrained")
+        "--num_train=2", "--finetune_steps=2", "--nopretrained",
+        "--workers=1")
     for name in ("metrics.json", "animation.gif", "frames.png", "truth.h5",
                  "predicted.h5"):
       self.assertIn(name, out)
