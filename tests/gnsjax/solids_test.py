@@ -33,6 +33,13 @@ RAMP_NORMAL = np.array([-0.1, 0.4]) / np.hypot(0.1, 0.4)
 DEPTH = SPACING / 2
 
 
+# Jitted: op by op, each call compiles a dozen tiny programs.
+_FRAME = jax.jit(geometry.obstacle_frame)
+_OUTLINE = jax.jit(geometry.obstacle_outline)
+_SAMPLE_SDF = jax.jit(geometry.sample_sdf)
+_SOLID_FEATURES = jax.jit(features.solid_features, static_argnums=2)
+
+
 def ramp_y(x):
   return 0.05 + 0.25 * np.asarray(x)
 
@@ -56,14 +63,13 @@ def exact_sdf():
 
 def frame(index):
   ramp, obstacles = params()
-  return tuple(np.asarray(a) for a in geometry.obstacle_frame(
-      ramp, obstacles[index]))
+  return tuple(np.asarray(a) for a in _FRAME(ramp, obstacles[index]))
 
 
 def outline(index, s):
   ramp, obstacles = params()
-  return np.asarray(geometry.obstacle_outline(ramp, obstacles[index],
-                                              jnp.asarray(s, jnp.float32)))
+  return np.asarray(_OUTLINE(ramp, obstacles[index],
+                             np.asarray(s, np.float32)))
 
 
 def flat_face_points(rng, n, depth):
@@ -169,7 +175,7 @@ class SDFTest(absltest.TestCase):
                                atol=1.01e-4, rtol=0)
 
   def test_grid_interpolates_the_exact_sdf(self):
-    phi, normal = geometry.sample_sdf(grid(), jnp.asarray(self.points))
+    phi, normal = _SAMPLE_SDF(grid(), jnp.asarray(self.points))
     phi, normal = np.asarray(phi), np.asarray(normal)
     # The SDF is 1-Lipschitz: bilinear interpolation is off by at most the
     # distance to a cell's corner, h / sqrt(2).
@@ -181,7 +187,7 @@ class SDFTest(absltest.TestCase):
     # exact, and the normal is the face's.
     rng = np.random.default_rng(1)
     p, offset = flat_face_points(rng, 20, DEPTH)
-    phi, normal = geometry.sample_sdf(grid(), jnp.asarray(p))
+    phi, normal = _SAMPLE_SDF(grid(), jnp.asarray(p))
     np.testing.assert_allclose(phi, offset, atol=2e-6)
     np.testing.assert_allclose(np.linalg.norm(normal, axis=-1), 1.0,
                                atol=1e-5)
@@ -191,7 +197,7 @@ class SDFTest(absltest.TestCase):
                                atol=1e-5)
 
   def test_solid_features_are_the_clipped_distance_and_faded_normal(self):
-    got = np.asarray(features.solid_features(jnp.asarray(self.points), grid(),
+    got = np.asarray(_SOLID_FEATURES(jnp.asarray(self.points), grid(),
                                              RADIUS))
     self.assertEqual(got.shape, (len(self.points), 3))
     free = self.free
@@ -209,7 +215,7 @@ class SDFTest(absltest.TestCase):
     # Near a flat face: the face's normal, weighted by 1 - phi / R.
     rng = np.random.default_rng(2)
     p, offset = flat_face_points(rng, 10, DEPTH)
-    got = np.asarray(features.solid_features(jnp.asarray(p), grid(), RADIUS))
+    got = np.asarray(_SOLID_FEATURES(jnp.asarray(p), grid(), RADIUS))
     weight = np.clip(1 - offset / RADIUS, 0, 1)
     np.testing.assert_allclose(got[:, 0], offset / RADIUS, atol=1e-4)
     np.testing.assert_allclose(got[:40, 1:], weight[:40, None] * RAMP_NORMAL,
@@ -222,13 +228,13 @@ class SDFTest(absltest.TestCase):
     positions = np.broadcast_to(self.points, (c, n, 2))
     stats = features.Stats(*(np.full(2, v, np.float32)
                              for v in (0.0, 1.0, 0.0, 1.0)))
-    got = features.node_features(jnp.asarray(positions), stats, grid(),
-                                 RADIUS)
+    got = jax.jit(features.node_features, static_argnums=3)(
+        jnp.asarray(positions), stats, grid(), RADIUS)
     self.assertEqual(got.shape, (n, features.num_node_features(c)))
     np.testing.assert_array_equal(got[:, :2 * (c - 1)], 0.0)
     np.testing.assert_allclose(
         got[:, 2 * (c - 1):],
-        features.solid_features(jnp.asarray(self.points), grid(), RADIUS))
+        _SOLID_FEATURES(jnp.asarray(self.points), grid(), RADIUS))
 
 
 class ConstrainTest(absltest.TestCase):
@@ -249,13 +255,13 @@ class ConstrainTest(absltest.TestCase):
   def _check(self, proposed, seed, tolerance):
     previous, moving = self._random_window(seed, proposed)
     positions, carried, info = self._constrain(previous, proposed, moving)
-    phi, normal = map(np.asarray, geometry.sample_sdf(grid(), proposed))
+    phi, normal = map(np.asarray, _SAMPLE_SDF(grid(), proposed))
     inside = moving & (phi < 0)
     self.assertGreater(inside.sum(), 50)
     self.assertGreater((moving & ~inside).sum(), 50)
     self.assertGreater((~moving & (phi < 0)).sum(), 20)
     # No moving node is left inside.
-    after, _ = geometry.sample_sdf(grid(), jnp.asarray(positions))
+    after, _ = _SAMPLE_SDF(grid(), jnp.asarray(positions))
     np.testing.assert_array_less(-np.asarray(tolerance)[moving],
                                  np.asarray(after)[moving])
     # Nodes outside the solids and static nodes are exactly left alone.
@@ -320,7 +326,7 @@ class ConstrainTest(absltest.TestCase):
 
     def deepest(pushes):
       positions, _, _ = self._constrain(p, p, moving, pushes)
-      return -float(np.min(geometry.sample_sdf(grid(), positions)[0]))
+      return -float(np.min(_SAMPLE_SDF(grid(), positions)[0]))
 
     self.assertGreater(deepest(1), SPACING / 4)
     self.assertLess(deepest(simulator.PUSHES), SPACING / 20)
@@ -340,7 +346,7 @@ class ConstrainTest(absltest.TestCase):
     # left phi = 0 at the walls: sand that had left was not seen inside).
     p = np.array([[-0.01, 0.2], [0.2, HEIGHT + 0.01], [WIDTH + 0.01, 0.25],
                   [WIDTH + 0.02, HEIGHT + 0.02]], np.float32)
-    phi, _ = geometry.sample_sdf(grid(), jnp.asarray(p))
+    phi, _ = _SAMPLE_SDF(grid(), jnp.asarray(p))
     np.testing.assert_allclose(phi, [-0.01, -0.01, -0.01, -0.02 * np.sqrt(2)],
                                atol=1e-6)
     positions, _, info = self._constrain(p, p, np.ones(len(p), bool))
@@ -369,8 +375,8 @@ class ConstrainTest(absltest.TestCase):
     weights = rng.normal(size=(2,) + proposed.shape)
     with jax.enable_x64(True):
       ramp, obstacles = params()
-      ramp = jax.tree.map(lambda a: a.astype(jnp.float64), ramp)
-      obstacles = [jax.tree.map(lambda a: a.astype(jnp.float64), o)
+      ramp = jax.tree.map(lambda a: np.asarray(a, np.float64), ramp)
+      obstacles = [jax.tree.map(lambda a: np.asarray(a, np.float64), o)
                    for o in obstacles]
 
       def objective(xs):
@@ -383,15 +389,16 @@ class ConstrainTest(absltest.TestCase):
         return (jnp.sum(weights[0] * positions) +
                 jnp.sum(weights[1] * carried))
 
-      xs = jnp.asarray([0.1, 0.2], jnp.float64)
+      xs = np.array([0.1, 0.2], np.float64)
       f = jax.jit(objective)
-      pushed = simulator.constrain(
+      pushed = jax.jit(lambda: simulator.constrain(
           jnp.asarray(previous), jnp.asarray(proposed), jnp.asarray(moving),
-          geometry.sdf_grid(ramp, obstacles, WIDTH, HEIGHT, SPACING))[2]
+          geometry.sdf_grid(ramp, obstacles, WIDTH, HEIGHT, SPACING))[2])()
       self.assertGreater(int(pushed.count), 10)
       grad = np.asarray(jax.jit(jax.grad(objective))(xs))
       h = 1e-6
-      fd = [(f(xs + e) - f(xs - e)) / (2 * h) for e in h * np.eye(2)]
+      fd = [(float(f(xs + e)) - float(f(xs - e))) / (2 * h)
+            for e in h * np.eye(2)]
     self.assertTrue(np.all(np.abs(grad) > 1e-3), grad)
     np.testing.assert_allclose(grad, fd, rtol=1e-5)
 
