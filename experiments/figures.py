@@ -11,7 +11,9 @@
 - The evaluation's figures: training curves (the paper's Figs. 3-4), test
   error by checkpoint (Fig. 5), error-against-time breakdowns (Figs. 6-9),
   and the flow checks a positional MSE misses (sand inside solids or outside
-  the domain, front error, the constraint's work) per step.
+  the domain, front error, the constraint's work) per step; the final
+  deposits, learned over the MPM's (a front that stalls or sand left
+  behind shows there).
 
 The libraries (``mpm``, ``gnsjax``) import no matplotlib.
 """
@@ -297,6 +299,43 @@ def flow_checks(results: Sequence[dict], frame_dt: float, path: str):
       ax.set_yscale("log")
   axes.flat[0].legend(fontsize=7)
   _save(fig, path)
+
+
+def final_deposits(results: Sequence[dict], path: str,
+                   columns: int = 4) -> str:
+  """The last frame of the learned rollout over the MPM's, for the first
+  test trajectory of each group: one panel each, the whole domain, so that
+  sand that stops short, runs on or stays behind is seen.
+
+  Args:
+    results: ``experiments.studies.evaluation.rollout_split``'s, each with
+      its ``trajectory`` (scene), ``truth`` and ``predicted`` [T, N, 2] (m).
+    path: the PNG to write.
+
+  Returns:
+    ``path``.
+  """
+  firsts = {}
+  for r in results:
+    firsts.setdefault(r["group"], r)
+  cases = [firsts[g] for g in sorted(firsts)]
+  columns = min(columns, len(cases))
+  rows = -(-len(cases) // columns)
+  fig, axes = plt.subplots(rows, columns, figsize=(4.5 * columns, 3.4 * rows),
+                           squeeze=False)
+  empty = (np.zeros((0, 2)), np.zeros((0,), np.int32))
+  for ax, r in zip(axes.ravel(), cases):
+    _draw_scene(ax, r["trajectory"].scene, *empty)
+    for label, x, colour in (("MPM", r["truth"][-1], "#222222"),
+                             ("GNS", r["predicted"][-1], "#d62728")):
+      ax.scatter(x[:, 0], x[:, 1], s=3, color=colour, alpha=0.7,
+                 linewidths=0, label=label, zorder=3)
+    ax.set_title(f"{r['group']} ({r['name']})", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left", markerscale=3)
+  for ax in axes.ravel()[len(cases):]:
+    ax.axis("off")
+  _save(fig, path)
+  return path
 
 
 def resolution_deposits(

@@ -304,7 +304,8 @@ class Settings(settings.Base):
 def run(s: Settings, out_dir: str) -> dict[str, Any]:
   """Writes the paper's figures, numbers and a report for a trained run:
   ``summary.json``, ``report.md``, ``trajectories.csv``, ``groups.csv``,
-  ``table2.csv`` and the figures (Figs. 3-9, ``flow_checks.png``) in
+  ``table2.csv`` and the figures (Figs. 3-9, ``flow_checks.png``,
+  ``final_deposits.png``) in
   ``out_dir``.
 
   Returns:
@@ -334,6 +335,8 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   figures.breakdown_curves(curves, results[0]["frames"] * frame_dt, out_dir)
   figures.flow_checks(results, frame_dt, os.path.join(out_dir,
                                                       "flow_checks.png"))
+  figures.final_deposits(results, os.path.join(out_dir,
+                                               "final_deposits.png"))
   rows = [per_trajectory_row(r) for r in results]
   mpm_io.write_csv(os.path.join(out_dir, "trajectories.csv"), rows)
   groups = group_summary(rows)

@@ -205,7 +205,8 @@ class RolloutSplitTest(absltest.TestCase):
         workdir=self.workdir, data=self.data, max_trajectories=1,
         timing_repeats=1, checkpoint_errors=False, unconstrained=False), out)
     for name in ("summary.json", "report.md", "trajectories.csv",
-                 "groups.csv", "table2.csv", "flow_checks.png"):
+                 "groups.csv", "table2.csv", "flow_checks.png",
+                 "final_deposits.png"):
       self.assertTrue(os.path.exists(os.path.join(out, name)), name)
     # The same rollout as rollout_split's, without the unconstrained one.
     (row,) = summary["rows"]
