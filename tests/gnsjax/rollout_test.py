@@ -162,16 +162,20 @@ class RolloutTest(absltest.TestCase):
     spec = self.problem.spec
     n = scene.window.shape[1]
     small = graph.allocate(spec, jnp.asarray(spread(n, spec)))
+    # Ample: 64 more edges per node and slots per cell than the start needs
+    # (never reallocated, checked below; 4096 ran 2 million padded edges).
     ample = graph.allocate(spec, jnp.asarray(scene.window[-1]),
-                           extra_capacity=4096)
+                           extra_capacity=64)
     steps = 9
-    reallocations = []
+    reallocations, ample_reallocations = [], []
     a = rollout.rollout(predictor, params, scene, steps, self.problem.context,
                         spec, chunk=4, nbrs=small,
                         on_reallocate=reallocations.append)
     b = rollout.rollout(predictor, params, scene, steps, self.problem.context,
-                        spec, chunk=4, nbrs=ample)
+                        spec, chunk=4, nbrs=ample,
+                        on_reallocate=ample_reallocations.append)
     self.assertNotEmpty(reallocations)
+    self.assertEmpty(ample_reallocations)
     np.testing.assert_allclose(a.positions, b.positions, atol=1e-6)
     np.testing.assert_array_equal(a.pushed, b.pushed)
     self.assertTrue(np.all(np.isfinite(a.positions)))
