@@ -163,7 +163,7 @@ class RolloutTest(absltest.TestCase):
     n = scene.window.shape[1]
     small = graph.allocate(spec, jnp.asarray(spread(n, spec)))
     # Ample: 64 more edges per node and slots per cell than the start needs
-    # (never reallocated, checked below; 4096 ran 2 million padded edges).
+    # (never reallocated, checked below; 4096 padded it to N x 4096 edges).
     ample = graph.allocate(spec, jnp.asarray(scene.window[-1]),
                            extra_capacity=64)
     steps = 9
