@@ -23,6 +23,10 @@ _OUT = flags.DEFINE_string("out", None, "New run directory to write.")
 
 def main(argv):
   del argv
+  if len(_WORKDIRS.value) < 2:
+    raise runtime.InputError(
+        f"--workdirs={','.join(_WORKDIRS.value)}: {len(_WORKDIRS.value)} "
+        "run(s); allowed: two or more run directories")
   for workdir in _WORKDIRS.value:
     runtime.existing_dir("workdirs", workdir, holding="checkpoints")
   runtime.writable("out", _OUT.value)

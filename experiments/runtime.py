@@ -160,6 +160,8 @@ def writable(flag: str, path: str, *, directory: bool = True) -> str:
   Raises:
     InputError: naming ``--flag`` and why not.
   """
+  if not path:
+    raise InputError(f"--{flag}=: empty; allowed: a path")
   if os.path.exists(path) and os.path.isdir(path) != directory:
     raise InputError(f"--{flag}={path}: exists and is not a "
                      f"{'directory' if directory else 'file'}")
@@ -280,6 +282,7 @@ def define_flags(settings_cls: type | tuple[type, ...],
       if not f.metadata.get("flag", True) or f.name in holders:
         continue
       kind, sequence, _ = settings_lib.element_type(hints[f.name])
+      _FIELDS[f.name] = (kind, sequence, f.metadata)
       default = defaults.get(f.name, f.default)
       help_text = f.metadata.get("help", "")
       if f.metadata.get("choices"):
@@ -292,6 +295,10 @@ def define_flags(settings_cls: type | tuple[type, ...],
         holders[f.name] = _DEFINE[kind](f.name, default, help_text,
                                         flag_values=flag_values)
   return holders
+
+
+# Flag name -> (scalar type, is a sequence, metadata) of its field.
+_FIELDS: dict[str, tuple[type, bool, Any]] = {}
 
 
 def _parse(name: str, given: list[str], kind: type) -> tuple:
@@ -314,6 +321,13 @@ def settings_from_flags(settings_cls: type, holders: dict[str, Any],
              if f.metadata.get("flag", True)}
   for name, holder in holders.items():
     if name not in flagged:
+      # Another study's flag, given: checked all the same (a bad value is
+      # refused even where this study does not read it).
+      if holder.present and holder.value is not None and name in _FIELDS:
+        kind, sequence, meta = _FIELDS[name]
+        for value in (_parse(name, holder.value, kind) if sequence else
+                      (holder.value,)):
+          settings_lib._check_value(name, value, kind, meta)  # pylint: disable=protected-access
       continue
     kind, sequence, _ = settings_lib.element_type(hints[name])
     value = holder.value

@@ -78,7 +78,7 @@ class Search(settings.Base):
   num_frames: int = settings.field(600, "Frames per rollout.", lower=2)
   learning_rate: float = settings.field(
       0.05, "Adam step size (m; for --problem=calibrate, a fraction of each "
-      "parameter's range).", lower=0)
+      "parameter's range).", lower=0, strict=True)
   sweep_points: int = settings.field(
       9, "MPM sweep placements (per parameter with --method=sweep).",
       lower=2)

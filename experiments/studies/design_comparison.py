@@ -188,7 +188,8 @@ class Budget(settings.Base):
   batch_size: int = settings.field(
       8, "Designs per batched MPM program of the baselines (CMA-ES's "
       "population).", lower=2)
-  seed: int = settings.field(0, "Seed of the baselines and the smoothing.")
+  seed: int = settings.field(0, "Seed of the baselines and the smoothing.",
+                             lower=0)
 
   def validate(self):
     super().validate()
@@ -232,11 +233,10 @@ class Settings(design.Common, Budget):
     if self.problem == "placement" and self.scene is not None:
       raise settings.InputError("--scene: the comparison of methods builds "
                                 "its scene; allowed: --shape, --size, --x0")
-    if self.problem == "baffles":
-      lo, hi = BAFFLES
-      if not lo <= self.num_baffles <= hi:
-        raise settings.InputError(f"--num_baffles={self.num_baffles}; "
-                                  f"allowed: {lo}-{hi}")
+    lo, hi = BAFFLES  # checked whichever the problem (no silent misuse)
+    if not lo <= self.num_baffles <= hi:
+      raise settings.InputError(f"--num_baffles={self.num_baffles}; "
+                                f"allowed: {lo}-{hi}")
     if self.problem == "two_obstacles":
       self._check_two_obstacles()
 

@@ -47,6 +47,7 @@ class First(Group):
 @dataclasses.dataclass(frozen=True)
 class Second(Group):
   mode: tuple[str, ...] = settings.field(("x",), "The second's list.")
+  level: float = settings.field(1.0, "Only the second's.", lower=0)
 
 
 class SettingsTest(absltest.TestCase):
@@ -95,7 +96,7 @@ class SettingsTest(absltest.TestCase):
   def test_studies_of_one_entry_point_share_their_flags(self):
     values = flags.FlagValues()
     holders = runtime.define_flags((First, Second), values)
-    self.assertEqual(sorted(holders), ["mine", "mode", "shared"])
+    self.assertEqual(sorted(holders), ["level", "mine", "mode", "shared"])
     # The flag of a field that the first study sets itself is the second's.
     self.assertEqual(values["mode"].default, ["x"])
     values(["prog", "--shared=3", "--mode=y,z"])
@@ -103,6 +104,12 @@ class SettingsTest(absltest.TestCase):
                      First(shared=3, mode="q"))
     self.assertEqual(runtime.settings_from_flags(Second, holders),
                      Second(shared=3, mode=("y", "z")))
+    # The second's flag, given, is checked where the first study runs too
+    # (issue 29: a bad value of a flag the study ignores is no exit 0).
+    values(["prog", "--level=-1"])
+    with self.assertRaisesRegex(mpm.InputError,
+                                r"^--level=-1.0: allowed: >= 0"):
+      runtime.settings_from_flags(First, holders, mode="q")
 
 
 if __name__ == "__main__":
