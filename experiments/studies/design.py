@@ -58,10 +58,13 @@ class Objective(settings.Base):
   """What to minimise (``gnsjax.design.objectives``)."""
   objective: str = settings.field("passed_fraction", "What to minimise.",
                                   choices=objectives.NAMES)
+  # Lines within the paper's box (scene_lib.Domain), as the sand can reach.
   x_protect: float = settings.field(
-      0.4, "passed_fraction: the protected line (m).")
+      0.4, "passed_fraction: the protected line (m).", lower=0,
+      upper=scene_lib.Domain.width)
   target_x: float = settings.field(
-      0.6, "centroid: the target deposit centroid x (m).")
+      0.6, "centroid: the target deposit centroid x (m).", lower=0,
+      upper=scene_lib.Domain.width)
   temperature: float | None = settings.field(
       None, "Temperature (m) of the smooth surrogate (default: the "
       "objective's own).", lower=0, strict=True)

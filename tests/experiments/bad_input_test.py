@@ -350,6 +350,12 @@ ROWS = (
     ("inverse_design_negative_seed", "experiments.inverse_design",
      ["--out={d}/out", "--method=cmaes", "--budget_s=10", "--seed=-1"],
      "--seed=-1: allowed: >= 0"),
+    ("inverse_design_target_x", "experiments.inverse_design",
+     ["--out={d}/out", "--method=cmaes", "--budget_s=10", "--target_x=-1"],
+     "--target_x=-1.0: allowed: >= 0"),
+    ("gradient_check_x_protect", "experiments.gradient_check",
+     ["--out={d}/out", "--x_protect=1e12"],
+     "--x_protect=1000000000000.0: allowed: <= 1.65"),
     # Item 8: a stiffness above the bound is refused with its cost.
     ("simulate_too_stiff", "experiments.simulate",
      ["--scene={d}/stiff.json", "--out={d}/out/traj.h5"],
