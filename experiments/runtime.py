@@ -325,8 +325,12 @@ def settings_from_flags(settings_cls: type, holders: dict[str, Any],
       # refused even where this study does not read it).
       if holder.present and holder.value is not None and name in _FIELDS:
         kind, sequence, meta = _FIELDS[name]
-        for value in (_parse(name, holder.value, kind) if sequence else
-                      (holder.value,)):
+        given = (_parse(name, holder.value, kind) if sequence else
+                 (holder.value,))
+        if not given and not meta.get("allow_empty"):
+          raise InputError(f"--{name} is empty; allowed: a comma-separated "
+                           "list of at least one value")
+        for value in given:
           settings_lib._check_value(name, value, kind, meta)  # pylint: disable=protected-access
       continue
     kind, sequence, _ = settings_lib.element_type(hints[name])
