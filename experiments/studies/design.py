@@ -81,7 +81,7 @@ class Search(settings.Base):
   num_frames: int = settings.field(600, "Frames per rollout.", lower=2)
   learning_rate: float = settings.field(
       0.05, "Adam step size (m; for --problem=calibrate, a fraction of each "
-      "parameter's range).", lower=0, strict=True)
+      "parameter's range).", lower=0, strict=True, upper=1)
   sweep_points: int = settings.field(
       9, "MPM sweep placements (per parameter with --method=sweep).",
       lower=2)
@@ -93,7 +93,7 @@ class Smoothing(settings.Base):
   (``gnsjax.design.smoothing``)."""
   sigma: float = settings.field(
       0.05, "Smoothing scale (m) of the smoothed gradients "
-      "(--method=adam_smoothed).", lower=0, strict=True)
+      "(--method=adam_smoothed).", lower=0, strict=True, upper=1)
   num_samples: int = settings.field(
       16, "Perturbed designs per smoothed gradient (even).", lower=2)
 

@@ -350,6 +350,13 @@ ROWS = (
     ("inverse_design_learning_rate_zero", "experiments.inverse_design",
      ["--out={d}/out", "--simulator=mpm", "--workdir=",
       "--learning_rate=0"], "--learning_rate=0.0: allowed: > 0"),
+    ("inverse_design_learning_rate_huge", "experiments.inverse_design",
+     ["--out={d}/out", "--simulator=mpm", "--workdir=",
+      "--learning_rate=1e12"], "--learning_rate=1000000000000.0: allowed: "
+     "<= 1"),
+    ("inverse_design_sigma_huge", "experiments.inverse_design",
+     ["--out={d}/out", "--method=cmaes", "--budget_s=10", "--sigma=1e12"],
+     "--sigma=1000000000000.0: allowed: <= 1"),
     ("inverse_design_negative_seed", "experiments.inverse_design",
      ["--out={d}/out", "--method=cmaes", "--budget_s=10", "--seed=-1"],
      "--seed=-1: allowed: >= 0"),
