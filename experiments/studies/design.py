@@ -67,7 +67,7 @@ class Objective(settings.Base):
       upper=scene_lib.Domain.width)
   temperature: float | None = settings.field(
       None, "Temperature (m) of the smooth surrogate (default: the "
-      "objective's own).", lower=0, strict=True)
+      "objective's own).", lower=0, strict=True, upper=1)
 
   def make_objective(self) -> objectives.Objective:
     return objectives.make(self.objective, x_protect=self.x_protect,
