@@ -204,7 +204,7 @@ class Settings(settings.Base):
   cfl: float = settings.field(0.4, "CFL number of the solver.", lower=0,
                               strict=True, upper=1)
   height: float = settings.field(0.1, "Column height h0 (m).", lower=0,
-                                 strict=True)
+                                 strict=True, upper=1)
   time: float = settings.field(0.8, "Simulated time of the column (s).",
                                lower=0, strict=True)
   paper_scenes: tuple[int, ...] = settings.field(
@@ -218,6 +218,10 @@ class Settings(settings.Base):
       "the settings are reported).", flag=False)
 
   def validate(self):
+    if not self.aspect_ratios and not self.paper_scenes:
+      raise settings.InputError(
+          "--aspect_ratios is empty and so is --paper_scenes: nothing to "
+          "measure; allowed: a column (--aspect_ratios) and/or paper scenes")
     frames = int(round(self.time / FRAME_TIME))
     if frames <= STILL_FRAMES:
       raise settings.InputError(
