@@ -206,7 +206,7 @@ class Settings(settings.Base):
   height: float = settings.field(0.1, "Column height h0 (m).", lower=0,
                                  strict=True, upper=1)
   time: float = settings.field(0.8, "Simulated time of the column (s).",
-                               lower=0, strict=True)
+                               lower=0, strict=True, upper=10)
   paper_scenes: tuple[int, ...] = settings.field(
       (), "Indices of test-plan scenes to measure too (600 frames each).",
       lower=0, upper=PLAN_SIZE - 1, allow_empty=True)
