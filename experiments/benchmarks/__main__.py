@@ -126,6 +126,9 @@ def check_inputs(what: list[str]) -> None:
     except FileNotFoundError as e:
       raise app.UsageError(f"--sand_block_dir={_SAND_BLOCK_DIR.value}: "
                            f"{e}") from e
+  elif _SAND_BLOCK_DIR.value is not None:
+    raise app.UsageError(f"--sand_block_dir={_SAND_BLOCK_DIR.value}: only "
+                         f"used by --what=gns (got --what={','.join(what)})")
   if "input" in what and _READ_DATA.value is None:
     raise app.UsageError("--read_data is required with --what=input: a "
                          "dataset directory of the small config")
