@@ -106,9 +106,7 @@ def _check_budget(spec, workers, shard):
       "spacing": "dataset.spacing", "dx": None,
       "num_frames": "dataset.num_frames", "scenes": "--workers"})
   disk = count * spec.num_frames * cost.particles * 8  # float32 x, y
-  parent = os.path.abspath(_OUT.value)
-  while not os.path.exists(parent):
-    parent = os.path.dirname(parent)
+  parent = runtime.existing_ancestor(_OUT.value)
   free = shutil.disk_usage(parent).free
   if disk > free:
     raise runtime.InputError(

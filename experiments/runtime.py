@@ -165,20 +165,31 @@ def writable(flag: str, path: str, *, directory: bool = True) -> str:
   if os.path.exists(path) and os.path.isdir(path) != directory:
     raise InputError(f"--{flag}={path}: exists and is not a "
                      f"{'directory' if directory else 'file'}")
-  parent = os.path.dirname(os.path.abspath(path))
-  while not os.path.exists(parent):
-    parent = os.path.dirname(parent)
+  created = _first_missing(os.path.abspath(path))
+  parent = os.path.dirname(created)
   if not os.path.isdir(parent):
     raise InputError(f"--{flag}={path}: {parent} is a file, not a directory")
   if not os.access(parent, os.W_OK | os.X_OK):
     raise InputError(f"--{flag}={path}: {parent} is not writable")
   # What this run would create: removed if it fails (run's cleanup).
-  created = os.path.abspath(path)
-  while not os.path.exists(os.path.dirname(created)):
-    created = os.path.dirname(created)
   if not os.path.exists(created):
     _CREATED.append(created)
   return path
+
+
+def _first_missing(path: str) -> str:
+  """``path`` (absolute), or its outermost ancestor that does not exist
+  yet: the first thing writing it creates (``path`` itself if it exists)."""
+  while not os.path.exists(os.path.dirname(path)):
+    path = os.path.dirname(path)
+  return path
+
+
+def existing_ancestor(path: str) -> str:
+  """``path`` (absolute) if it exists, else its nearest existing ancestor."""
+  path = os.path.abspath(path)
+  return path if os.path.exists(path) else os.path.dirname(
+      _first_missing(path))
 
 
 # Outputs that did not exist when checked (``writable``): a run that fails
@@ -325,13 +336,9 @@ def settings_from_flags(settings_cls: type, holders: dict[str, Any],
       # refused even where this study does not read it).
       if holder.present and holder.value is not None and name in _FIELDS:
         kind, sequence, meta = _FIELDS[name]
-        given = (_parse(name, holder.value, kind) if sequence else
-                 (holder.value,))
-        if not given and not meta.get("allow_empty"):
-          raise InputError(f"--{name} is empty; allowed: a comma-separated "
-                           "list of at least one value")
-        for value in given:
-          settings_lib._check_value(name, value, kind, meta)  # pylint: disable=protected-access
+        value = (_parse(name, holder.value, kind) if sequence else
+                 holder.value)
+        settings_lib.check_value(name, value, kind, sequence, meta)
       continue
     kind, sequence, _ = settings_lib.element_type(hints[name])
     value = holder.value

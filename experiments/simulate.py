@@ -37,9 +37,10 @@ def main(argv):
     seed = -1
   # Before any work: what cannot fit this machine's memory is refused, what
   # takes hours said (with the estimate).
-  cost = budget.check_fits(scene, chunk_frames=_CHUNK.value)
-  if budget.warning(cost):
-    print(budget.warning(cost), file=sys.stderr)
+  warning = budget.warning(budget.check_fits(scene,
+                                            chunk_frames=_CHUNK.value))
+  if warning:
+    print(warning, file=sys.stderr)
   # Before minutes of simulating: the file must be writable at the end.
   runtime.writable("out", _OUT.value, directory=False)
   runtime.enable_compilation_cache()

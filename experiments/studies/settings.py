@@ -69,7 +69,23 @@ def element_type(annotation) -> tuple[type, bool, bool]:
   return annotation, False, optional
 
 
-def _check_value(name: str, value, kind: type, meta: dict) -> None:
+def check_value(name: str, value, kind: type, sequence: bool,
+                meta) -> None:
+  """Checks one field's value (not None) against its element type
+  (``element_type``) and metadata; raises InputError naming ``--name``."""
+  if sequence:
+    if not isinstance(value, tuple):
+      raise InputError(f"--{name}={value}: allowed: a comma-separated list")
+    if not value and not meta.get("allow_empty"):
+      raise InputError(f"--{name} is empty; allowed: a comma-separated "
+                       "list of at least one value")
+    for v in value:
+      _check_scalar(name, v, kind, meta)
+  else:
+    _check_scalar(name, value, kind, meta)
+
+
+def _check_scalar(name: str, value, kind: type, meta) -> None:
   shown = f"--{name}={value}"
   if kind is float or kind is int:
     if isinstance(value, bool) or not isinstance(
@@ -106,17 +122,7 @@ def check_fields(settings) -> None:
       if not optional:
         raise InputError(f"--{f.name} is required")
       continue
-    if sequence:
-      if not isinstance(value, tuple):
-        raise InputError(f"--{f.name}={value}: allowed: a comma-separated "
-                         "list")
-      if not value and not meta.get("allow_empty"):
-        raise InputError(f"--{f.name} is empty; allowed: a comma-separated "
-                         "list of at least one value")
-      for v in value:
-        _check_value(f.name, v, kind, meta)
-    else:
-      _check_value(f.name, value, kind, meta)
+    check_value(f.name, value, kind, sequence, meta)
 
 
 @dataclasses.dataclass(frozen=True)
