@@ -23,6 +23,7 @@ from jax._src import xla_bridge  # no public backends_are_initialized
 import mpm
 from experiments import config_files
 from experiments.studies import settings as settings_lib
+from mpm import budget
 from mpm import io as mpm_io
 
 # A value given by the user is malformed or out of range (a flag, a scene
@@ -345,4 +346,9 @@ def settings_from_flags(settings_cls: type, holders: dict[str, Any],
     if sequence and value is not None:
       value = _parse(name, value, kind)
     values[name] = value
-  return settings_cls(**values)
+  settings = settings_cls(**values)
+  # Refused above if it cannot fit; a job of hours is said before it starts.
+  warning = budget.plan_warning(settings.simulation_seconds())
+  if warning:
+    print(warning, file=sys.stderr)
+  return settings

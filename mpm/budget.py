@@ -11,6 +11,7 @@ particles from ten thousand, not to be exact.
 import dataclasses
 import math
 import os
+from typing import Mapping, Sequence
 
 from mpm import scene as scene_lib
 from mpm import simulation
@@ -164,7 +165,9 @@ def check_fits(scene: scene_lib.Scene, *, scenes: int = 1,
 
   Args:
     names: what to call the settings in the message (keys ``spacing``,
-      ``dx``, ``num_frames``, ``scenes``); default the scene's keys.
+      ``dx``, ``num_frames``, ``scenes``); default the scene's keys; None
+      for a setting the caller does not let the user set directly (no fix
+      is proposed for it).
 
   Returns:
     The :class:`Cost`, when it fits.
@@ -191,21 +194,23 @@ def check_fits(scene: scene_lib.Scene, *, scenes: int = 1,
       solver=dataclasses.replace(scene.solver, dx=scene.dx * k))
   k = _largest(lambda k: size(coarser(1 / k)) <= memory_bytes, 1e-6, 1.0)
   fixes = []
-  if frames is not None and int(frames) >= 3:
+  if frames is not None and int(frames) >= 3 and names["num_frames"]:
     fixes.append(f"{names['num_frames']} <= {int(frames):,}")
   # A coarser lattice must still hold the scene's particles.
   wanted = scene.granular.num_particles or 1
-  if k is not None and _lattice(coarser(1 / k).granular) >= wanted:
+  if (k is not None and names["spacing"] and
+      _lattice(coarser(1 / k).granular) >= wanted):
     fixes.append(f"{names['spacing']} >= "
                  f"{_up(scene.granular.spacing / k):g}" +
                  ("" if names["dx"] is None else
                   f" (with {names['dx']} >= {_up(scene.dx / k):g})"))
   one = estimate(scene, chunk_frames=chunk_frames).memory_bytes
-  if scenes > 1 and one <= memory_bytes:
+  if scenes > 1 and one <= memory_bytes and names["scenes"]:
     fixes.insert(0, f"{names['scenes']} <= {memory_bytes // one}")
   raise scene_lib.InputError(
-      f"{names['spacing']} = {scene.granular.spacing:g}, "
-      f"{names['num_frames']} = {scene.num_frames:,}: {cost.describe()}; "
+      f"{names['spacing'] or 'spacing'} = {scene.granular.spacing:g}, "
+      f"{names['num_frames'] or 'frames'} = {scene.num_frames:,}: "
+      f"{cost.describe()}; "
       f"{memory_source} is {gib(memory_bytes)}; allowed: what fits, e.g. "
       f"{' or '.join(fixes) or 'a smaller scene'}")
 
@@ -220,3 +225,41 @@ def warning(cost: Cost, total_scenes: int = 1, workers: int = 1) -> str | None:
           f"({cost.describe()}"
           f"{f', {total_scenes:,} scenes' if total_scenes > 1 else ''}); "
           "continuing")
+
+
+@dataclasses.dataclass(frozen=True)
+class Planned:
+  """Simulations a job will run: ``count`` scenes like ``scene`` in all,
+  ``at_once`` of them in one program (a batch).
+
+  ``names`` is ``check_fits``'s: what the job's flags call the scene's
+  settings.
+  """
+  scene: scene_lib.Scene
+  count: int = 1
+  at_once: int = 1
+  names: Mapping[str, str | None] | None = None
+
+
+def check_plan(plan: Sequence[Planned], *,
+               memory_bytes: int | None = None,
+               memory_source: str = "this machine's memory") -> float:
+  """Refuses a job any of whose simulations cannot fit (``check_fits``,
+  naming the job's flags) before it starts; returns the job's estimated
+  seconds of simulating on a CPU (for :func:`plan_warning`)."""
+  if memory_bytes is None:
+    memory_bytes, memory_source = machine_memory_bytes()
+  total = 0.0
+  for p in plan:
+    cost = check_fits(p.scene, scenes=p.at_once, names=dict(p.names or {}),
+                      memory_bytes=memory_bytes, memory_source=memory_source)
+    total += p.count * cost.seconds
+  return total
+
+
+def plan_warning(seconds: float, what: str = "this job") -> str | None:
+  """A one-line warning if ``seconds`` (``check_plan``'s) is hours."""
+  if seconds < WARN_SECONDS:
+    return None
+  return (f"warning: {what} simulates for about {duration(seconds)} on a "
+          "CPU (the MPM alone, estimated before any work); continuing")

@@ -340,11 +340,25 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       n_substeps=s.n_substeps) for b, s in enumerate(setups)]
 
 
+def _check_fits(scenes: Sequence[scene_lib.Scene], chunk_frames: int):
+  """Refuses scenes (one program) that cannot fit the first device."""
+  from mpm import budget  # pylint: disable=g-import-not-at-top (it imports this module)
+  memory, source = budget.machine_memory_bytes(jax.devices()[0])
+  largest = max(scenes, key=lambda s: budget.estimate(s).memory_bytes)
+  budget.check_fits(largest, scenes=len(scenes), chunk_frames=chunk_frames,
+                    memory_bytes=memory, memory_source=source)
+
+
 def simulate(scene: scene_lib.Scene, **kwargs) -> SimulationResult:
   """Simulates ``scene.num_frames`` frames of one scene.
 
   Keyword arguments are those of :func:`simulate_setups`.
+
+  Raises:
+    InputError: before any work, if the scene cannot fit the device's
+      memory (``mpm.budget.check_fits``: the estimate and what would fit).
   """
+  _check_fits([scene], kwargs.get("chunk_frames", 50))
   return simulate_setups([setup(scene)], **kwargs)[0]
 
 
@@ -354,7 +368,12 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene],
 
   The substep count is the largest any scene needs, so every scene keeps its
   CFL bound. Keyword arguments are those of :func:`simulate_setups`.
+
+  Raises:
+    InputError: before any work, if the batch cannot fit the device's
+      memory (``mpm.budget.check_fits``, naming the batch size that fits).
   """
+  _check_fits(scenes, kwargs.get("chunk_frames", 50))
   setups = [setup(s) for s in scenes]
   n_substeps = max(s.n_substeps for s in setups)
   setups = [dataclasses.replace(

@@ -42,6 +42,9 @@ class Settings(design.Search, design_comparison.Budget):
       (25, 0.8), "calibrate: where the search starts (friction angle in "
       "deg, basal friction).")
 
+  def simulations(self):
+    return self.batched(super().simulations())
+
   def validate(self):
     super().validate()
     if any(m not in calibration.METHODS for m in self.method):

@@ -33,6 +33,7 @@ from experiments import figures
 from experiments import timing
 from experiments.studies import settings
 from experiments.studies import tradeoff
+from mpm import budget
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -257,6 +258,21 @@ class Settings(settings.Base):
               f"--paper_spacings={spacing:g}: scene {plan[i].name} "
               f"(--paper_scenes={i}) is refused at this spacing: {e}"
               ) from None
+
+
+  def simulations(self) -> list[budget.Planned]:
+    column = {"spacing": "--spacings", "num_frames": None, "dx": None,
+              "scenes": None}
+    plan = [budget.Planned(column_scene(a, spacing, self.height, self.cfl,
+                                        self.time), names=column)
+            for a in self.aspect_ratios for spacing in self.spacings]
+    paper = {**column, "spacing": "--paper_spacings"}
+    scenes = (tradeoff.study_scenes(max(self.paper_scenes) + 1)
+              if self.paper_scenes else [])
+    return plan + [budget.Planned(tradeoff.at_spacing(scenes[i], spacing),
+                                  names=paper)
+                   for i in self.paper_scenes
+                   for spacing in self.paper_spacings]
 
 
 def report(summary: dict[str, Any]) -> str:

@@ -28,6 +28,7 @@ from gnsjax import data
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
 from gnsjax import train
+from mpm import budget
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -55,6 +56,16 @@ class Settings(settings.Base):
                                     "Start from the shipped small model.")
   workers: int = settings.field(2, "Processes simulating the dataset.",
                                 lower=1)
+
+  def simulations(self) -> list[budget.Planned]:
+    """The demo's dataset, --workers scenes at once."""
+    config = demo_config(self.num_train, _NUM_TEST, self.finetune_steps,
+                         self.num_frames)
+    plan = dataset.plan(dataset.DatasetSpec(**config.dataset.to_dict()))
+    names = {"num_frames": "--num_frames", "scenes": "--workers",
+             "spacing": None, "dx": None}
+    return [budget.Planned(p.scene, at_once=min(self.workers, len(plan)),
+                           names=names) for p in plan]
 
 
 def demo_config(num_train: int, num_test: int, steps: int,

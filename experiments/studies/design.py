@@ -34,6 +34,7 @@ from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
 from gnsjax.design import scenes
 from gnsjax.design import smoothing
+from mpm import budget
 from mpm import io as mpm_io
 from mpm import sampler
 from mpm import scene as scene_lib
@@ -85,6 +86,16 @@ class Search(settings.Base):
   sweep_points: int = settings.field(
       9, "MPM sweep placements (per parameter with --method=sweep).",
       lower=2)
+
+  def simulations(self) -> list[budget.Planned]:
+    """One rollout of the paper's heap per design (its MPM's size)."""
+    return [budget.Planned(scenes.one_obstacle(num_frames=self.num_frames),
+                           names=FRAMES_ONLY)]
+
+
+# What the design studies let a user size: the frames (the heap is fixed).
+FRAMES_ONLY = {"num_frames": "--num_frames", "spacing": None, "dx": None,
+               "scenes": None}
 
 
 @dataclasses.dataclass(frozen=True)

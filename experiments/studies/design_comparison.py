@@ -51,6 +51,7 @@ from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
 from gnsjax.design import scenes
 from gnsjax.design import smoothing
+from mpm import budget as mpm_budget
 from mpm import io as mpm_io
 from mpm import sampler
 
@@ -206,6 +207,13 @@ class Budget(settings.Base):
   def budget(self) -> baselines.Budget:
     return baselines.Budget(self.budget_evals, self.budget_s)
 
+  def batched(self, plan: list[mpm_budget.Planned]
+              ) -> list[mpm_budget.Planned]:
+    """``plan`` and its runs as the baselines' batches of --batch_size."""
+    return plan + [dataclasses.replace(
+        p, at_once=self.batch_size,
+        names={**(p.names or {}), "scenes": "--batch_size"}) for p in plan]
+
 
 @dataclasses.dataclass(frozen=True)
 class Settings(design.Common, Budget):
@@ -226,6 +234,9 @@ class Settings(design.Common, Budget):
 
   def builds_obstacle(self) -> bool:
     return self.problem == "placement"
+
+  def simulations(self) -> list[mpm_budget.Planned]:
+    return self.batched(super().simulations())
 
   def validate(self):
     super().validate()

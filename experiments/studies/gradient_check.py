@@ -36,6 +36,7 @@ from gnsjax.design import placement as placement_lib
 from gnsjax.design import rollouts
 from gnsjax.design import scenes
 from gnsjax.design import smoothing
+from mpm import budget
 from mpm import io as mpm_io
 
 SIMULATORS = ("mpm", "gns")
@@ -162,6 +163,13 @@ class Settings(design.Objective, design.Smoothing):
             f"--xs: {bad} with {flag}: x +- {name} must lie in [{lo:g}, "
             f"{hi:g}] m")
     self.check_samples()
+
+  def simulations(self) -> list[budget.Planned]:
+    """A rollout per x and step; the learned simulator's rollouts keep as
+    many frames as the MPM's (sized as the MPM's, an upper bound)."""
+    return [budget.Planned(scenes.one_obstacle(num_frames=self.num_frames),
+                           count=len(self.xs) * (2 * len(self.hs) + 1),
+                           names=design.FRAMES_ONLY)]
 
 
 def run(s: Settings, out_dir: str) -> dict[str, Any]:

@@ -22,6 +22,7 @@ import typing
 from typing import Any
 
 import mpm
+from mpm import budget
 
 InputError = mpm.InputError
 
@@ -132,9 +133,20 @@ class Base:
   def __post_init__(self):
     check_fields(self)
     self.validate()
+    budget.check_plan(self.simulations())
 
   def validate(self) -> None:
     """Relations between fields; raises InputError naming the flags."""
+
+  def simulations(self) -> list[budget.Planned]:
+    """The MPM simulations these settings ask for (their sizes, named by
+    the flags), refused on construction where one cannot fit this
+    machine's memory; none by default."""
+    return []
+
+  def simulation_seconds(self) -> float:
+    """The estimated CPU seconds of :meth:`simulations`."""
+    return budget.check_plan(self.simulations())
 
   def to_dict(self) -> dict[str, Any]:
     return {k: list(v) if isinstance(v, tuple) else v

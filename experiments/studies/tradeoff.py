@@ -40,6 +40,7 @@ from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
 from gnsjax import simulator
 from gnsjax import tradeoff
+from mpm import budget
 from mpm import dataset
 from mpm import io as mpm_io
 
@@ -463,6 +464,24 @@ class Settings(settings.Base):
     if twice:
       raise settings.InputError(f"--gns: name(s) {twice} given twice; "
                                 "allowed: distinct names")
+
+  def simulations(self) -> list[budget.Planned]:
+    scenes = study_scenes(self.scenes, self.num_frames)
+    largest = max(scenes, key=lambda x: x.granular.num_particles)
+    plan = []
+    for spacing in sorted(set(self.spacings) | {self.reference_spacing}):
+      names = {"spacing": ("--reference_spacing" if spacing ==
+                           self.reference_spacing else "--spacings"),
+               "num_frames": "--num_frames", "dx": None, "scenes": None}
+      plan += [budget.Planned(at_spacing(x, spacing), names=names)
+               for x in scenes]
+      plan.append(budget.Planned(at_spacing(largest, spacing),
+                                 count=self.repeats - 1, names=names))
+      if spacing >= self.batched_min_spacing and spacing in self.spacings:
+        plan.append(budget.Planned(
+            at_spacing(largest, spacing), count=self.repeats * len(scenes),
+            at_once=len(scenes), names={**names, "scenes": "--scenes"}))
+    return plan
 
   def gns_workdirs(self) -> list[tuple[str, str]]:
     """(name, work directory) of each ``--gns`` item; InputError for an

@@ -107,10 +107,61 @@ class CheckFitsTest(absltest.TestCase):
       budget.check_fits(_paper(), scenes=500, memory_bytes=16 * GIB,
                         names={"scenes": "--workers"})
 
+  def test_a_setting_the_caller_hides_gets_no_fix(self):
+    # A study that sets the spacing itself: only its frames are proposed.
+    names = {"spacing": None, "dx": None, "num_frames": "--num_frames"}
+    with self.assertRaisesRegex(mpm.InputError, r"^spacing = 0.005, "
+                                r"--num_frames = 100,000,000: .*e\.g\. "
+                                r"--num_frames <= [\d,]+$"):
+      budget.check_fits(_paper(num_frames=100_000_000), names=names,
+                        memory_bytes=16 * GIB)
+    with self.assertRaisesRegex(mpm.InputError, "e.g. a smaller scene$"):
+      budget.check_fits(_paper(num_frames=100_000_000),
+                        names={**names, "num_frames": None},
+                        memory_bytes=16 * GIB)
+
   def test_this_machine_reports_its_memory(self):
     memory, source = budget.machine_memory_bytes()
     self.assertGreater(memory, 2**28)
     self.assertEqual(source, "this machine's memory")
+
+
+class PlanTest(absltest.TestCase):
+
+  def test_a_plan_costs_the_sum_of_its_runs(self):
+    one, other = _paper(), _paper(num_frames=1200)
+    seconds = budget.check_plan([budget.Planned(one, count=3),
+                                 budget.Planned(other, count=2)],
+                                memory_bytes=16 * GIB)
+    self.assertAlmostEqual(seconds, 3 * budget.estimate(one).seconds +
+                           2 * budget.estimate(other).seconds)
+    self.assertEqual(budget.check_plan([], memory_bytes=16 * GIB), 0.0)
+
+  def test_a_plan_is_refused_by_its_largest_run_naming_its_flag(self):
+    plan = [budget.Planned(_paper()),
+            budget.Planned(_paper(), at_once=500,
+                           names={"scenes": "--batch_size"})]
+    with self.assertRaisesRegex(mpm.InputError, r"--batch_size <= (\d+)"):
+      budget.check_plan(plan, memory_bytes=16 * GIB)
+
+  def test_hours_are_warned_minutes_are_not(self):
+    self.assertIsNone(budget.plan_warning(budget.WARN_SECONDS - 1))
+    self.assertIn("about 2 h", budget.plan_warning(7200.0))
+
+
+class SimulateRefusesTest(absltest.TestCase):
+  """The library's own entry points refuse before building anything."""
+
+  def test_simulate_refuses_a_hundred_million_frames(self):
+    with self.assertRaisesRegex(mpm.InputError, "num_frames = 100,000,000"):
+      mpm.simulate(_paper(num_frames=100_000_000))
+
+  def test_simulate_batch_refuses_a_batch_that_cannot_fit(self):
+    # ~0.5 GiB each (mostly the process, counted per scene): 100,000 of
+    # them exceed any machine this runs on.
+    with self.assertRaisesRegex(mpm.InputError,
+                                r"for 100000 at once.*scenes at once <= "):
+      mpm.simulate_batch([_paper()] * 100_000)
 
 
 if __name__ == "__main__":
