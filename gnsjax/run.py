@@ -38,15 +38,20 @@ def model_config_dict(model_config) -> dict:
 # the data's (others, like trajectory counts, may change between a run and
 # its fine-tuning) and the inputs'.
 _PHYSICS = (("train", "input_frames"), ("train", "frame_stride"),
-            ("dataset", "spacing"), ("dataset", "connectivity_radius"))
+            ("dataset", "spacing"), ("dataset", "connectivity_radius"),
+            ("dataset", "rheology"))
+# Their values in configs that predate them.
+_PHYSICS_DEFAULTS = {("dataset", "rheology"): "drucker_prager"}
 
 
 def physics_differences(stored: dict, current: dict
                         ) -> list[tuple[str, Any, Any]]:
   """("section.key", stored value, current value) for each of those
   settings that differs between two config dicts."""
-  pairs = [(f"{section}.{key}", stored.get(section, {}).get(key),
-            current.get(section, {}).get(key)) for section, key in _PHYSICS]
+  value = lambda config, section, key: config.get(section, {}).get(
+      key, _PHYSICS_DEFAULTS.get((section, key)))
+  pairs = [(f"{section}.{key}", value(stored, section, key),
+            value(current, section, key)) for section, key in _PHYSICS]
   return [(where, a, b) for where, a, b in pairs if a != b]
 
 

@@ -32,6 +32,7 @@ moduli and stress, radians for angles.
 import jax
 import jax.numpy as jnp
 
+from mpm import _pytree
 from mpm import linalg
 
 _SQRT2 = 1.4142135623730951
@@ -98,23 +99,18 @@ def kirchhoff_stress(F, mu, lam):
                     jnp.stack([s1, p - s0], -1)], -2)
 
 
-def project(F, volume_correction, mu, lam, alpha):
-  """Drucker-Prager return mapping with volume correction (tensor form).
-
-  Args:
-    F: [..., 2, 2] trial elastic deformation gradients.
-    volume_correction: [...] v_c, accumulated log volume of separation.
-    mu, lam: Lamé parameters [Pa]; alpha: see ``friction_coefficient``.
-
-  Returns:
-    (F, volume_correction) after projection, same shapes.
-  """
-  trace, dev = log_strain(F)
-  trace_c = trace + volume_correction
+def _deviatoric_norm(dev):
+  """||dev eps||_F of the deviatoric strain (d0, d1), 0 where it is 0
+  (with a finite gradient there)."""
   dev_sq = dev[..., 0]**2 + dev[..., 1]**2
   dev_norm = _SQRT2 * jnp.sqrt(jnp.where(dev_sq > 0, dev_sq, 1.0))
-  dev_norm = jnp.where(dev_sq > 0, dev_norm, 0.0)  # ||dev eps||_F
-  delta_gamma = dev_norm + (lam + mu) / mu * alpha * trace_c
+  return jnp.where(dev_sq > 0, dev_norm, 0.0)
+
+
+def _return_map(F, trace_c, dev, dev_norm, delta_gamma):
+  """F after the return: its rotation where the sand separates
+  (trace_c >= 0), F <- exp(-delta_gamma n) F where delta_gamma > 0 (n the
+  unit deviatoric strain), else F; and the new volume correction."""
   expand = trace_c >= 0
   on_cone = jnp.logical_and(~expand, delta_gamma > 0)
 
@@ -140,6 +136,97 @@ def project(F, volume_correction, mu, lam, alpha):
   F_new = jnp.where(expand[..., None, None], rotation,
                     jnp.where(on_cone[..., None, None], cone, F))
   return F_new, jnp.where(expand, trace_c, 0.0)
+
+
+def project(F, volume_correction, mu, lam, alpha):
+  """Drucker-Prager return mapping with volume correction (tensor form).
+
+  Args:
+    F: [..., 2, 2] trial elastic deformation gradients.
+    volume_correction: [...] v_c, accumulated log volume of separation.
+    mu, lam: Lamé parameters [Pa]; alpha: see ``friction_coefficient``.
+
+  Returns:
+    (F, volume_correction) after projection, same shapes.
+  """
+  trace, dev = log_strain(F)
+  trace_c = trace + volume_correction
+  dev_norm = _deviatoric_norm(dev)
+  delta_gamma = dev_norm + (lam + mu) / mu * alpha * trace_c
+  return _return_map(F, trace_c, dev, dev_norm, delta_gamma)
+
+
+@_pytree.pytree_dataclass
+class MuI:
+  """The mu(I) rheology's parameters (GDR MiDi 2004; Jop, Forterre &
+  Pouliquen 2006), all traced.
+
+  Attributes:
+    mu_s: [] friction at rest (I -> 0): tau_eq / p.
+    mu_2: [] friction as I -> infinity.
+    I_0: [] inertial number at which mu is halfway.
+    grain_diameter: [] d (m).
+    grain_density: [] rho_s (kg/m^3).
+  """
+  mu_s: jax.Array
+  mu_2: jax.Array
+  I_0: jax.Array  # pylint: disable=invalid-name
+  grain_diameter: jax.Array
+  grain_density: jax.Array
+
+
+def mu_of_i(inertial_number, rheology: MuI):
+  """mu(I) = mu_s + (mu_2 - mu_s) I / (I_0 + I)."""
+  return rheology.mu_s + (rheology.mu_2 - rheology.mu_s) * (
+      inertial_number / (rheology.I_0 + inertial_number))
+
+
+def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
+  """The mu(I) return mapping: explicit, one quadratic per yielding
+  particle (as Dunatunga & Kamrin 2015; ``PlasticModel::DPMui`` of the MPM
+  code larsblatny/matter).
+
+  With p = -(mu + lam) tr(eps) the pressure and tau_eq = sqrt(2) mu
+  ||dev eps||_F the equivalent shear stress (tau_eq = ||dev tau||_F /
+  sqrt(2)), a trial state with tau_eq > mu_s p returns to
+  tau = mu(I) p, where I = gamma_p d / sqrt(p / rho_s) and gamma_p =
+  (tau_trial - tau) / (mu dt) is the plastic shear rate the return
+  implies. With y = tau_trial - tau and S = tau_trial - mu_s p:
+
+    c y^2 + (I_0 + c (mu_2 - mu_s) p - c S) y - S I_0 = 0,
+    c = d / (mu dt sqrt(p / rho_s)),
+
+  whose positive root is taken. With mu_2 = mu_s it is y = S: the
+  Drucker-Prager return at alpha = mu_s / sqrt(2) (``project``).
+  Separation (tr eps + v_c >= 0) is handled as there.
+
+  Args:
+    F, volume_correction, mu, lam: as ``project``.
+    rheology: the parameters; dt: the substep (s).
+
+  Returns:
+    (F, volume_correction) after projection, same shapes.
+  """
+  trace, dev = log_strain(F)
+  trace_c = trace + volume_correction
+  dev_norm = _deviatoric_norm(dev)
+  p = -(mu + lam) * trace_c
+  tau_trial = _SQRT2 * mu * dev_norm
+  # Separating sand (p <= 0) is _return_map's; only compressed sand yields.
+  yielding = jnp.logical_and(trace_c < 0, tau_trial > rheology.mu_s * p)
+  # Safe values where it does not yield keep both branches' gradients
+  # finite.
+  p = jnp.where(yielding, p, 1.0)
+  s = jnp.where(yielding, tau_trial - rheology.mu_s * p, 1.0)
+  c = rheology.grain_diameter / (
+      mu * dt * jnp.sqrt(p / rheology.grain_density))
+  b = rheology.I_0 + c * ((rheology.mu_2 - rheology.mu_s) * p - s)
+  root = jnp.sqrt(b * b + 4 * c * s * rheology.I_0)
+  # The positive root, each form free of cancellation on its side.
+  drop = jnp.where(b >= 0, 2 * s * rheology.I_0 / (b + root),
+                   (root - b) / (2 * c))
+  delta_gamma = jnp.where(yielding, drop / (_SQRT2 * mu), 0.0)
+  return _return_map(F, trace_c, dev, dev_norm, delta_gamma)
 
 
 def project_principal(F, volume_correction, mu, lam, alpha):

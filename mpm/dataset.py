@@ -73,6 +73,8 @@ class DatasetSpec:
     spacing: particle spacing (m); the grid spacing is twice that, and the
       paper's particle counts scale with (0.005 / spacing)^2.
     connectivity_radius: written to the metadata for the learned simulator.
+    rheology: the sand's, ``mpm.scene.RHEOLOGIES`` (mu(I) with its
+      defaults: docs/physics.md).
   """
   num_train: int = 1000
   num_test: int = 100
@@ -80,8 +82,13 @@ class DatasetSpec:
   seed: int = 0
   spacing: float = PAPER_SPACING
   connectivity_radius: float = 0.015
+  rheology: str = "drucker_prager"
 
   def __post_init__(self):
+    if self.rheology not in scene_lib.RHEOLOGIES:
+      raise scene_lib.InputError(
+          f"dataset.rheology = {self.rheology!r}; allowed: one of "
+          f"{list(scene_lib.RHEOLOGIES)}")
     # Both splits are written, and the statistics need 3 frames.
     for key, lo in (("num_train", 1), ("num_test", 1), ("num_frames", 3)):
       value = getattr(self, key)
@@ -111,8 +118,10 @@ class PlannedScene:
 
 
 def _scene(spec: DatasetSpec, seed: int, name: str, **kwargs):
-  return sampler.sample_scene(seed, name=name, num_frames=spec.num_frames,
-                              spacing=spec.spacing, **kwargs)
+  scene = sampler.sample_scene(seed, name=name, num_frames=spec.num_frames,
+                               spacing=spec.spacing, **kwargs)
+  return (scene if spec.rheology == "drucker_prager" else
+          scene_lib.with_rheology(scene, spec.rheology))
 
 
 def plan(spec: DatasetSpec) -> list[PlannedScene]:
@@ -187,8 +196,11 @@ _SPEC_FILE = "spec.json"
 
 def _differences(stored: dict, spec: DatasetSpec) -> list[str]:
   current = dataclasses.asdict(spec)
-  return [f"{k} {stored.get(k)!r} (this config: {current[k]!r})"
-          for k in current if stored.get(k) != current[k]]
+  # A key added since the dataset was made has its default there.
+  made = {f.name: stored.get(f.name, f.default)
+          for f in dataclasses.fields(DatasetSpec)}
+  return [f"{k} {made[k]!r} (this config: {current[k]!r})"
+          for k in current if made[k] != current[k]]
 
 
 def check_target(spec: DatasetSpec, out_dir: str) -> None:

@@ -118,11 +118,48 @@ class Granular:
 
 @dataclasses.dataclass(frozen=True)
 class Material:
-  """Dry sand: Hencky elasticity with a Drucker-Prager yield surface."""
+  """Dry sand: Hencky elasticity with a Drucker-Prager yield surface, or
+  with the rate-dependent friction of the mu(I) rheology.
+
+  Attributes:
+    rheology: "drucker_prager" (constant friction, the paper's) or "mu_i"
+      (mu = mu_s + (mu_2 - mu_s) / (I_0 / I + 1), I the inertial number).
+    mu_s, mu_2, I_0, grain_diameter (m), grain_density (kg/m^3): the mu(I)
+      parameters (docs/physics.md); None with Drucker-Prager.
+  """
   density: float = 1538.0            # kg / m^3
   youngs_modulus: float = 3.537e5    # Pa
   poisson_ratio: float = 0.3
   friction_angle_deg: float = 35.0   # internal friction angle, degrees
+  rheology: str = "drucker_prager"
+  mu_s: float | None = None
+  mu_2: float | None = None
+  I_0: float | None = None  # pylint: disable=invalid-name (the literature's)
+  grain_diameter: float | None = None
+  grain_density: float | None = None
+
+  def to_dict(self) -> dict[str, Any]:
+    """The JSON form; the mu(I) keys only with that rheology (so the
+    paper's files are unchanged)."""
+    d = dataclasses.asdict(self)
+    if self.rheology == "drucker_prager":
+      for key in RHEOLOGIES["mu_i"]:
+        del d[key]
+      del d["rheology"]
+    return d
+
+
+# The rheologies and the keys each adds to the material.
+RHEOLOGIES = {
+    "drucker_prager": (),
+    "mu_i": ("mu_s", "mu_2", "I_0", "grain_diameter", "grain_density"),
+}
+# mu(I) defaults: mu_2 - mu_s and I_0 of glass beads (Jop, Forterre &
+# Pouliquen 2006), sand grains of 0.5 mm, quartz.
+MU_I_DELTA = 0.26
+MU_I_I0 = 0.279
+MU_I_GRAIN_DIAMETER = 0.0005  # m
+MU_I_GRAIN_DENSITY = 2650.0   # kg / m^3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,7 +208,7 @@ class Scene:
         "ramp": ramp,
         "obstacles": [o.to_dict() for o in self.obstacles],
         "granular": granular,
-        "material": dataclasses.asdict(self.material),
+        "material": self.material.to_dict(),
         "boundary_friction": self.boundary_friction,
         "wall_friction": self.wall_friction,
         "solver": {"dx": self.dx, "cfl": self.solver.cfl},
@@ -241,6 +278,57 @@ def _integer(d: Mapping[str, Any], key: str, default: Any, where: str,
   if value < lo:
     raise InputError(f"{name} = {value} is out of range; allowed: >= {lo}")
   return value
+
+
+def with_rheology(scene: "Scene", rheology: str) -> "Scene":
+  """``scene`` with sand of ``rheology`` (``RHEOLOGIES``), its parameters
+  at their defaults for the scene's friction angle."""
+  d = scene.to_dict()
+  for key in ("rheology",) + RHEOLOGIES["mu_i"]:
+    d["material"].pop(key, None)
+  if rheology != "drucker_prager":
+    d["material"]["rheology"] = rheology
+  return Scene.from_dict(d)
+
+
+def _parse_rheology(md: Mapping[str, Any], density: float) -> dict[str, Any]:
+  """The material's rheology and its parameters (defaults filled in)."""
+  rheology = md.get("rheology", "drucker_prager")
+  if rheology not in RHEOLOGIES:
+    raise InputError(f"material.rheology = {rheology!r}; allowed: one of "
+                     f"{list(RHEOLOGIES)}")
+  unused = [k for k in RHEOLOGIES["mu_i"] if k in md]
+  if rheology != "mu_i":
+    if unused:
+      raise InputError(f"material: {unused} only apply with "
+                       "material.rheology = 'mu_i'; allowed: set it, or "
+                       "leave them out")
+    return {}
+  angle = _number(md, "friction_angle_deg", Material.friction_angle_deg,
+                  "material", 0.0, 80.0)
+  # Default: the friction of Drucker-Prager at friction_angle_deg, which in
+  # plane strain yields at tau_eq = sin(phi) p (Mohr-Coulomb in 2D), so the
+  # two rheologies are the same sand at rest and differ only in the rate.
+  mu_s = _number(md, "mu_s", math.sin(math.radians(angle)), "material", 0,
+                 10, lo_open=True)
+  mu_2 = _number(md, "mu_2", mu_s + MU_I_DELTA, "material", 0, 10,
+                 lo_open=True)
+  if mu_2 <= mu_s:
+    raise InputError(f"material.mu_2 = {mu_2:g} is not above material.mu_s "
+                     f"= {mu_s:g}; allowed: mu_2 > mu_s (the friction rises "
+                     "with the inertial number)")
+  grain_density = _number(md, "grain_density", MU_I_GRAIN_DENSITY,
+                          "material", 0, 1e5, lo_open=True)
+  if grain_density < density:
+    raise InputError(f"material.grain_density = {grain_density:g} is below "
+                     f"material.density = {density:g}; allowed: >= the bulk "
+                     "density (grains and the voids between them)")
+  return {"rheology": rheology, "mu_s": mu_s, "mu_2": mu_2,
+          "I_0": _number(md, "I_0", MU_I_I0, "material", 0, 10,
+                         lo_open=True),
+          "grain_diameter": _number(md, "grain_diameter", MU_I_GRAIN_DIAMETER,
+                                    "material", 0, 0.1, lo_open=True),
+          "grain_density": grain_density}
 
 
 def _parse_ramp(d: Mapping[str, Any], domain: Domain) -> Ramp:
@@ -391,7 +479,8 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
       poisson_ratio=poisson_ratio,
       friction_angle_deg=_number(md, "friction_angle_deg",
                                  Material.friction_angle_deg, "material",
-                                 0.0, 80.0))
+                                 0.0, 80.0),
+      **_parse_rheology(md, density))
 
   return Scene(
       domain=domain, ramp=ramp, obstacles=obstacles, granular=granular,

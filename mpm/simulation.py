@@ -101,7 +101,11 @@ def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
       friction_angle=f32(math.radians(m.friction_angle_deg)),
       boundary_friction=f32(scene.boundary_friction),
       wall_friction=f32(scene.wall_friction), gravity=f32([0.0, -GRAVITY]),
-      dt=f32(dt), domain=f32([scene.domain.width, scene.domain.height]))
+      dt=f32(dt), domain=f32([scene.domain.width, scene.domain.height]),
+      mu_i=None if m.rheology == "drucker_prager" else constitutive.MuI(
+          mu_s=f32(m.mu_s), mu_2=f32(m.mu_2), I_0=f32(m.I_0),
+          grain_diameter=f32(m.grain_diameter),
+          grain_density=f32(m.grain_density)))
 
 
 def _bucket(n: int, multiple: int) -> int:

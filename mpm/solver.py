@@ -56,6 +56,9 @@ class SimParams:
     gravity: [2] m/s^2.
     dt: [] substep (s).
     domain: [2] width and height of the domain (m).
+    mu_i: the mu(I) rheology's parameters, or None for Drucker-Prager at
+      ``friction_angle`` (which rheology is part of the program's
+      structure; its parameters are traced).
   """
   density: jax.Array
   youngs_modulus: jax.Array
@@ -66,6 +69,7 @@ class SimParams:
   gravity: jax.Array
   dt: jax.Array
   domain: jax.Array
+  mu_i: constitutive.MuI | None = None
 
 
 def init_state(x: jax.Array, volume: jax.Array) -> MPMState:
@@ -108,7 +112,11 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   x = boundary.project_particles(field, st, state.x + dt * v, state.x, spec.dx)
   x = jnp.clip(x, 0.0, params.domain[None, :])
   F = state.F + dt * jnp.sum(C[..., :, :, None] * state.F[..., None, :, :], -2)
-  F, vc = constitutive.project(F, state.volume_correction, mu, lam, alpha)
+  if params.mu_i is None:
+    F, vc = constitutive.project(F, state.volume_correction, mu, lam, alpha)
+  else:
+    F, vc = constitutive.project_mu_i(F, state.volume_correction, mu, lam,
+                                      params.mu_i, dt)
   max_speed_sq = jnp.max(jnp.sum(v * v, -1))
   return state.replace(x=x, v=v, C=C, F=F, volume_correction=vc), max_speed_sq
 

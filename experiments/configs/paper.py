@@ -14,6 +14,8 @@ def get_config() -> ml_collections.ConfigDict:
   config.dataset.seed = 0
   config.dataset.spacing = 0.005          # m; 700-1000 particles per scene
   config.dataset.connectivity_radius = 0.015
+  # "mu_i" makes a dataset of the mu(I) rheology (docs/physics.md).
+  config.dataset.rheology = "drucker_prager"
   config.workers = 2                      # dataset generation processes
 
   # Model: encoder, M message-passing steps, decoder.

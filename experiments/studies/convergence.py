@@ -20,6 +20,7 @@ estimates the converged value where the changes shrink. ``run`` writes
 """
 
 import dataclasses
+import itertools
 import json
 import math
 import os
@@ -36,6 +37,7 @@ from experiments.studies import tradeoff
 from mpm import budget
 from mpm import dataset
 from mpm import io as mpm_io
+from mpm import scene as scene_lib
 
 FLOOR = 0.02            # m, the floor's height in the domain
 FLOOR_FRICTION = 0.7
@@ -50,13 +52,17 @@ def column_domain(aspect: float, height: float) -> tuple[float, float]:
 
 
 def column_scene(aspect: float, spacing: float, height: float = 0.1,
-                 cfl: float = 0.4, duration: float = 0.8) -> mpm.Scene:
+                 cfl: float = 0.4, duration: float = 0.8,
+                 rheology: str = "drucker_prager") -> mpm.Scene:
   """A column of ``height`` (m) and width height / aspect against the left
-  wall, on a flat floor with room to run out; grid spacing 2 x spacing."""
+  wall, on a flat floor with room to run out; grid spacing 2 x spacing;
+  the sand of ``rheology`` (mu(I) with its defaults: at rest the same as
+  Drucker-Prager's)."""
   width0 = height / aspect
   width, top = column_domain(aspect, height)
-  return mpm.Scene.from_dict({
-      "name": f"column_a{aspect:g}_s{spacing:g}",
+  suffix = "" if rheology == "drucker_prager" else f"_{rheology}"
+  return scene_lib.with_rheology(mpm.Scene.from_dict({
+      "name": f"column_a{aspect:g}_s{spacing:g}{suffix}",
       "domain": {"width": width, "height": top},
       "ramp": {"kind": "polyline", "points": [[0.0, FLOOR], [width, FLOOR]]},
       "granular": {"box": [0.0, FLOOR, width0, FLOOR + height],
@@ -64,7 +70,7 @@ def column_scene(aspect: float, spacing: float, height: float = 0.1,
       "material": {"friction_angle_deg": FRICTION_ANGLE},
       "boundary_friction": FLOOR_FRICTION, "wall_friction": 0.0,
       "solver": {"dx": 2 * spacing, "cfl": cfl},
-      "num_frames": int(round(duration / FRAME_TIME))})
+      "num_frames": int(round(duration / FRAME_TIME))}), rheology)
 
 
 # Deposit measures, from the toe to the bulk: (name, quantile of the final
@@ -214,11 +220,19 @@ class Settings(settings.Base):
   paper_spacings: tuple[float, ...] = settings.field(
       (0.01, 0.005, 0.0025), "Particle spacings (m) of the paper scenes, "
       "coarse to fine.", lower=0, strict=True)
+  rheologies: tuple[str, ...] = settings.field(
+      ("drucker_prager",), "Rheologies of the sand, each run at every "
+      "spacing (mu_i: mu(I) with its defaults, docs/physics.md).",
+      choices=tuple(scene_lib.RHEOLOGIES))
   command: str = settings.field(
       "", "The command line that asked for the run, for the report ('': "
       "the settings are reported).", flag=False)
 
   def validate(self):
+    if len(set(self.rheologies)) != len(self.rheologies):
+      raise settings.InputError(
+          f"--rheologies={','.join(self.rheologies)}: allowed: distinct "
+          f"values of {list(scene_lib.RHEOLOGIES)}")
     if not self.aspect_ratios and not self.paper_scenes:
       raise settings.InputError(
           "--aspect_ratios is empty and so is --paper_scenes: nothing to "
@@ -264,15 +278,29 @@ class Settings(settings.Base):
     column = {"spacing": "--spacings", "num_frames": None, "dx": None,
               "scenes": None}
     plan = [budget.Planned(column_scene(a, spacing, self.height, self.cfl,
-                                        self.time), names=column)
+                                        self.time), names=column,
+                           count=len(self.rheologies))
             for a in self.aspect_ratios for spacing in self.spacings]
     paper = {**column, "spacing": "--paper_spacings"}
     scenes = (tradeoff.study_scenes(max(self.paper_scenes) + 1)
               if self.paper_scenes else [])
     return plan + [budget.Planned(tradeoff.at_spacing(scenes[i], spacing),
-                                  names=paper)
+                                  names=paper, count=len(self.rheologies))
                    for i in self.paper_scenes
                    for spacing in self.paper_spacings]
+
+
+def _per_rheology(rows, group, keys) -> list[str]:
+  """``extrapolations`` within each rheology of ``rows`` (rows without the
+  column, from before it: Drucker-Prager)."""
+  lines = []
+  for rheology in dict.fromkeys(r.get("rheology", "drucker_prager")
+                                for r in rows):
+    mine = [r for r in rows
+            if r.get("rheology", "drucker_prager") == rheology]
+    lines += [f"- {rheology}, " + line[2:]
+              for line in extrapolations(mine, group, keys)]
+  return lines
 
 
 def report(summary: dict[str, Any]) -> str:
@@ -290,13 +318,13 @@ def report(summary: dict[str, Any]) -> str:
   column_rows, paper_rows = summary["column"], summary["paper"]
   if column_rows:
     lines += markdown_table(column_rows) + [""]
-    lines += extrapolations(column_rows, "aspect_ratio",
-                            [name for name, _ in MEASURES])
+    lines += _per_rheology(column_rows, "aspect_ratio",
+                           [name for name, _ in MEASURES])
   if paper_rows:
     lines += ["", "## Paper scenes", ""]
     lines += markdown_table(paper_rows) + [""]
-    lines += extrapolations(paper_rows, "scene",
-                            [name for name, _ in PAPER_MEASURES])
+    lines += _per_rheology(paper_rows, "scene",
+                           [name for name, _ in PAPER_MEASURES])
   return "\n".join(lines) + "\n"
 
 
@@ -331,24 +359,31 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
     mpm_io.write_csv(os.path.join(out_dir, "convergence_paper.csv"),
                      paper_rows)
 
-  for aspect in s.aspect_ratios:
-    for spacing in tqdm.tqdm(s.spacings, desc=f"a = {aspect:g}", unit="run"):
-      scene = column_scene(aspect, spacing, s.height, s.cfl, s.time)
-      x, wall = simulate(scene, f"column, a = {aspect:g}", spacing)
+  for aspect, rheology in itertools.product(s.aspect_ratios, s.rheologies):
+    for spacing in tqdm.tqdm(s.spacings, desc=f"a = {aspect:g} {rheology}",
+                             unit="run"):
+      scene = column_scene(aspect, spacing, s.height, s.cfl, s.time,
+                           rheology)
+      x, wall = simulate(scene, f"column, a = {aspect:g}, {rheology}",
+                         spacing)
       column_rows.append({
-          "aspect_ratio": aspect, "spacing_m": spacing, "dx_m": scene.dx,
+          "aspect_ratio": aspect, "rheology": rheology,
+          "spacing_m": spacing, "dx_m": scene.dx,
           "particles": x.shape[1],
           **runouts(x[-1, :, 0], s.height / aspect),
           "still_moving_m": float(
               np.abs(x[-1] - x[-1 - STILL_FRAMES]).max()),
           "wall_time_s": wall})
       save()
-  for index in s.paper_scenes:
-    for spacing in tqdm.tqdm(s.paper_spacings, desc=plan[index].name,
+  for index, rheology in itertools.product(s.paper_scenes, s.rheologies):
+    for spacing in tqdm.tqdm(s.paper_spacings,
+                             desc=f"{plan[index].name} {rheology}",
                              unit="run"):
-      scene = tradeoff.at_spacing(plan[index], spacing)
-      x, wall = simulate(scene, plan[index].name, spacing)
-      paper_rows.append({"scene": plan[index].name, "spacing_m": spacing,
+      scene = scene_lib.with_rheology(
+          tradeoff.at_spacing(plan[index], spacing), rheology)
+      x, wall = simulate(scene, f"{plan[index].name}, {rheology}", spacing)
+      paper_rows.append({"scene": plan[index].name, "rheology": rheology,
+                         "spacing_m": spacing,
                          "dx_m": scene.dx, "particles": x.shape[1],
                          **paper_measures(x[0, :, 0], x[-1, :, 0]),
                          "wall_time_s": wall})

@@ -249,5 +249,113 @@ class ProjectTest(parameterized.TestCase):
     self.assertGreater(np.max(np.abs(grad)), 0.0)
 
 
+
+def _mu_i(mu_s=0.6, mu_2=0.86, i_0=0.279, d=5e-4, rho_s=2650.0):
+  return constitutive.MuI(*(jnp.float32(v) for v in (mu_s, mu_2, i_0, d,
+                                                     rho_s)))
+
+
+_project_mu_i = jax.jit(constitutive.project_mu_i)
+
+
+def _pressure_and_shear(tau):
+  """p = -tr(tau) / 2 and tau_eq = ||dev tau||_F / sqrt(2), float64."""
+  tau = np.asarray(tau, np.float64)
+  p = -(tau[..., 0, 0] + tau[..., 1, 1]) / 2
+  dev = tau + p[..., None, None] * np.eye(2)
+  return p, np.sqrt((dev**2).sum((-2, -1)) / 2)
+
+
+class MuITest(parameterized.TestCase):
+  """The mu(I) return map (``project_mu_i``)."""
+
+  def test_with_mu_2_equal_to_mu_s_it_is_drucker_prager(self):
+    phi = math.radians(35.0)
+    f = _random_f(np.random.default_rng(3), 500).astype(np.float32)
+    vc = np.zeros(500, np.float32)
+    f_dp, vc_dp = _project(f, vc, MU, LAM,
+                           constitutive.friction_coefficient(phi))
+    f_mi, vc_mi = _project_mu_i(f, vc, MU, LAM,
+                                _mu_i(math.sin(phi), math.sin(phi)), 1e-4)
+    np.testing.assert_allclose(f_mi, f_dp, rtol=0, atol=2e-6)
+    np.testing.assert_array_equal(vc_mi, vc_dp)
+
+  def test_a_hand_computed_return(self):
+    # Compressed by 0.1% in area and sheared by 0.4%: p = 340 Pa, the
+    # trial's tau_eq = 544 Pa, far above mu_s p = 204 Pa.
+    f = np.array([[1.0, 0.004], [0.0, 1.0]]) * math.exp(-0.0005)
+    dt, rheology = 1e-4, _mu_i()
+    p_tr, tau_tr = _pressure_and_shear(constitutive.kirchhoff_stress(
+        jnp.asarray(f, jnp.float32), MU, LAM))
+    # By hand, in float64: y = tau_tr - tau solves
+    # (S - y)(I_0 + c y) = (mu_2 - mu_s) p c y, S = tau_tr - mu_s p.
+    p = -(MU + LAM) * math.log(np.linalg.det(f))
+    c = 5e-4 / (MU * dt * math.sqrt(p / 2650.0))
+    excess = tau_tr - 0.6 * p
+    y = max(np.roots([c, 0.279 + c * (0.26 * p - excess),
+                      -excess * 0.279]))
+    f_new, _ = _project_mu_i(jnp.asarray(f, jnp.float32), jnp.zeros(()),
+                             MU, LAM, rheology, dt)
+    p_new, tau_new = _pressure_and_shear(
+        constitutive.kirchhoff_stress(f_new, MU, LAM))
+    self.assertAlmostEqual(p_new / p, 1.0, delta=1e-3)   # deviatoric only
+    self.assertAlmostEqual(tau_new / (tau_tr - y), 1.0, delta=2e-3)
+    # ... and the state it returns to is on mu(I) at the rate it implies.
+    inertial = (tau_tr - tau_new) / (MU * dt) * 5e-4 / math.sqrt(
+        p / 2650.0)
+    mu_expected = float(constitutive.mu_of_i(inertial, rheology))
+    self.assertAlmostEqual(tau_new / p_new, mu_expected, delta=2e-3)
+    self.assertBetween(tau_new / p_new, 0.6, 0.86)
+
+  def test_inside_mu_s_nothing_changes(self):
+    f = _random_f(np.random.default_rng(4), 300, log_mean=(-0.05, -0.03),
+                  log_spread=1e-4).astype(np.float32)
+    p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
+    self.assertTrue(np.all(tau < 0.6 * p))
+    f_new, vc = _project_mu_i(f, np.zeros(300, np.float32), MU, LAM,
+                              _mu_i(), 1e-4)
+    np.testing.assert_array_equal(f_new, f)
+    np.testing.assert_array_equal(vc, 0.0)
+
+  @parameterized.parameters(30.0, 200.0, 1000.0)
+  def test_steady_simple_shear_follows_mu_of_i(self, shear_rate):
+    """A material point sheared at a constant rate under a constant
+    pressure (simple shear keeps the volume) reaches tau_eq = mu(I) p with
+    I = shear_rate d / sqrt(p / rho_s): the local law behind the
+    Bagnold profile."""
+    dt, rheology = 1e-5, _mu_i()
+    step = jnp.asarray([[1.0, shear_rate * dt], [0.0, 1.0]], jnp.float32)
+    f0 = jnp.eye(2, dtype=jnp.float32) * math.exp(-0.0005)
+
+    def body(_, state):
+      f, vc = state
+      return _project_mu_i(step @ f, vc, MU, LAM, rheology, dt)
+
+    f, _ = jax.jit(lambda f0: jax.lax.fori_loop(
+        0, 3000, body, (f0, jnp.zeros(()))))(f0)
+    p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
+    inertial = shear_rate * 5e-4 / math.sqrt(p / 2650.0)
+    expected = float(constitutive.mu_of_i(inertial, rheology))
+    self.assertAlmostEqual(tau / p, expected, delta=0.01 * expected)
+
+  def test_gradients_finite_at_identity_on_and_inside(self):
+    f = np.concatenate([
+        np.broadcast_to(np.eye(2), (3, 2, 2)),
+        _random_f(np.random.default_rng(5), 200, log_mean=(-0.05, -0.01))
+    ]).astype(np.float32)
+
+    def loss(f, rheology):
+      f_new, vc = constitutive.project_mu_i(f, jnp.zeros(f.shape[0]), MU,
+                                            LAM, rheology, 1e-4)
+      return jnp.sum(_stress(f_new, MU, LAM)) + jnp.sum(vc)
+
+    g_f, g_r = jax.jit(jax.grad(loss, argnums=(0, 1)))(jnp.asarray(f),
+                                                       _mu_i())
+    self.assertTrue(np.all(np.isfinite(g_f)))
+    leaves = jax.tree.leaves(g_r)
+    self.assertTrue(all(np.all(np.isfinite(x)) for x in leaves))
+    self.assertGreater(abs(float(g_r.mu_s)), 0.0)
+
+
 if __name__ == "__main__":
   absltest.main()

@@ -363,6 +363,30 @@ class OtherSpecTest(absltest.TestCase):
   def test_spec_values_are_checked(self):
     with self.assertRaisesRegex(ValueError, "dataset.num_test = 0; allowed"):
       dataclasses.replace(SPEC, num_test=0)
+    with self.assertRaisesRegex(ValueError, "dataset.rheology = 'mui'; "
+                                "allowed: one of \\['drucker_prager', "
+                                "'mu_i'\\]"):
+      dataclasses.replace(SPEC, rheology="mui")
+
+  def test_a_dataset_made_before_the_rheology_key_is_drucker_prager(self):
+    stored = dataclasses.asdict(SPEC)
+    del stored["rheology"]
+    mpm_io.write_json(os.path.join(self.dir, "metadata.json"),
+                      {"spec": stored, "num_train": 3})
+    dataset.check_target(SPEC, self.dir)
+    with self.assertRaisesRegex(dataset.scene_lib.InputError,
+                                "its rheology 'drucker_prager' \\(this "
+                                "config: 'mu_i'\\)"):
+      dataset.check_target(dataclasses.replace(SPEC, rheology="mu_i"),
+                           self.dir)
+
+  def test_a_mu_i_dataset_plans_the_same_scenes_with_mu_i_sand(self):
+    dp = dataset.plan(SPEC)
+    mu_i = dataset.plan(dataclasses.replace(SPEC, rheology="mu_i"))
+    for a, b in zip(dp, mu_i):
+      self.assertEqual(b.scene.material.rheology, "mu_i")
+      self.assertEqual(dataclasses.replace(b.scene, material=a.scene.material),
+                       a.scene)
 
 
 class ExclusiveGenerationTest(absltest.TestCase):

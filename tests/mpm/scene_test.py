@@ -2,6 +2,7 @@
 
 import copy
 import json
+import math
 import os
 import tempfile
 
@@ -163,6 +164,29 @@ def _invalid_cases():
       dict(testcase_name="friction_angle_not_a_number",
            d=_with(material__friction_angle_deg="35"),
            key="material.friction_angle_deg", allowed="expected a number"),
+      # The mu(I) rheology.
+      dict(testcase_name="unknown_rheology",
+           d=_with(material__rheology="bingham"), key="material.rheology",
+           allowed="allowed: one of ['drucker_prager', 'mu_i']"),
+      dict(testcase_name="mu_i_key_without_mu_i",
+           d=_with(material__mu_2=0.9), key="material",
+           allowed="only apply with material.rheology = 'mu_i'"),
+      dict(testcase_name="mu_2_not_above_mu_s",
+           d=_with(material__rheology="mu_i", material__mu_s=0.6,
+                   material__mu_2=0.6), key="material.mu_2",
+           allowed="allowed: mu_2 > mu_s"),
+      dict(testcase_name="zero_mu_s",
+           d=_with(material__rheology="mu_i", material__mu_s=0),
+           key="material.mu_s", allowed="allowed: (0, 10]"),
+      dict(testcase_name="zero_grain_diameter",
+           d=_with(material__rheology="mu_i", material__grain_diameter=0),
+           key="material.grain_diameter", allowed="allowed: (0, 0.1]"),
+      dict(testcase_name="negative_I_0",
+           d=_with(material__rheology="mu_i", material__I_0=-0.1),
+           key="material.I_0", allowed="allowed: (0, 10]"),
+      dict(testcase_name="grains_lighter_than_the_bulk",
+           d=_with(material__rheology="mu_i", material__grain_density=1000),
+           key="material.grain_density", allowed="allowed: >= the bulk"),
       dict(testcase_name="negative_boundary_friction",
            d=_with(boundary_friction=-0.1),
            key="boundary_friction", allowed="allowed: [0, 10]"),
@@ -254,6 +278,18 @@ class ValidationTest(parameterized.TestCase):
 
 class RoundTripTest(parameterized.TestCase):
 
+  def test_mu_i_defaults_and_the_paper_files_unchanged(self):
+    dp = mpm.Scene.from_dict(_base())
+    self.assertEqual(dp.material.rheology, "drucker_prager")
+    self.assertNotIn("rheology", dp.to_dict()["material"])
+    self.assertNotIn("mu_s", dp.to_dict()["material"])
+    d = _with(material__rheology="mu_i", material__friction_angle_deg=30)
+    m = mpm.Scene.from_dict(d).material
+    self.assertAlmostEqual(m.mu_s, math.sin(math.radians(30)))
+    self.assertAlmostEqual(m.mu_2, m.mu_s + 0.26)
+    self.assertEqual((m.I_0, m.grain_diameter, m.grain_density),
+                     (0.279, 0.0005, 2650.0))
+
   @parameterized.named_parameters(
       ("default", {}),
       ("obstacles_of_every_shape", {
@@ -271,6 +307,9 @@ class RoundTripTest(parameterized.TestCase):
           "boundary_friction": 0.3, "wall_friction": 0.1,
           "solver": {"dx": 0.02, "cfl": 0.3}, "num_frames": 7,
           "frame_dt": 0.01}),
+      ("mu_i", {"material": {"rheology": "mu_i", "mu_s": 0.5, "mu_2": 0.7,
+                             "I_0": 0.3, "grain_diameter": 0.001,
+                             "grain_density": 2500}}),
   )
   def test_dict_and_json(self, d):
     scene = mpm.Scene.from_dict(d)
