@@ -36,6 +36,17 @@ class SimulationError(RuntimeError):
     self.frame = frame
 
 
+class SpeedBoundError(SimulationError):
+  """A particle passed the speed its substep count was chosen for (the run
+  driver retries with more substeps before reporting it)."""
+
+
+# Substep counts ``simulate_setups`` tries, as multiples of a setup's own,
+# before a particle's speed is reported as a blow-up: a short ladder, so
+# at most two more programs are compiled.
+SUBSTEP_LADDER = (1, 2, 4)
+
+
 def wave_speed(material: scene_lib.Material) -> float:
   """P-wave speed c_p = sqrt((lambda + 2 mu) / rho) [m/s]."""
   mu, lam = constitutive.lame_parameters(material.youngs_modulus,
@@ -59,6 +70,13 @@ def substeps_per_frame(scene: scene_lib.Scene, max_speed: float) -> int:
   dt_max = scene.solver.cfl * scene.dx / (wave_speed(scene.material) +
                                           max_speed)
   return max(1, int(math.ceil(scene.frame_dt / dt_max - 1e-9)))
+
+
+def speed_allowed(scene: scene_lib.Scene, n_substeps: int) -> float:
+  """The largest speed [m/s] that ``n_substeps`` per frame keep within the
+  CFL condition (``substeps_per_frame``'s inverse)."""
+  dt = scene.frame_dt / n_substeps
+  return scene.solver.cfl * scene.dx / dt - wave_speed(scene.material)
 
 
 _make_field = jax.jit(boundary.make_field, static_argnums=(0, 2, 3))
@@ -229,7 +247,7 @@ def check_frames(scene_name: str, first_frame: int, finite: np.ndarray,
       raise SimulationError(scene_name, first_frame + k,
                             "positions are not finite (numerical blow-up)")
     if not max_speed[k] <= bound:
-      raise SimulationError(
+      raise SpeedBoundError(
           scene_name, first_frame + k,
           f"particle speed {max_speed[k]:.3f} m/s exceeds {bound:.3f} m/s, "
           "the bound the substep count was chosen for (CFL violated)")
@@ -286,11 +304,20 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   boundary-node count and run as one vmapped program (the throughput path on
   accelerators). Every chunk of frames is checked before the next one runs.
 
+  A chunk in which a particle passes the speed the substep count was
+  chosen for is run again from its start with twice, then four times the
+  substeps (``SUBSTEP_LADDER``), each checked against the speed it allows;
+  the rest of the run keeps the raised count. Only a chunk that fails at the
+  top of the ladder, or goes non-finite within its bound, is an error.
+
   Args:
     setups: from :func:`setup`, all with equal ``spec``, ``n_substeps`` and
       ``scene.num_frames``, ``scene.frame_dt``.
     chunk_frames: frames per compiled call (checking granularity).
     progress: called with the number of frames finished after each chunk.
+
+  Returns:
+    Per setup, its result; ``n_substeps`` is the largest count used.
 
   Raises:
     SimulationError: at the first bad frame of any scene.
@@ -308,25 +335,52 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   state, params, field = _stacked(setups, batched)
   n_chunks, frames = chunking(first.scene.num_frames, chunk_frames)
   fn = _batched_rollout if batched else _rollout
-  static = (first.spec, frames, first.n_substeps)
-  compiled, compile_time = _compile(fn, state, params, field, *static)
   pick = lambda a, b: a[b] if batched else a
+  compile_time = 0.0
 
+  def rung(k):
+    """(compiled chunk, params, per-setup speed bounds) at ladder rung k."""
+    nonlocal compile_time
+    n = first.n_substeps * SUBSTEP_LADDER[k]
+    if k == 0:
+      rung_params, bounds = params, [s.max_speed for s in setups]
+    else:
+      dt = [s.scene.frame_dt / n for s in setups]
+      rung_params = params.replace(
+          dt=jnp.asarray(dt if batched else dt[0], jnp.float32))
+      bounds = [speed_allowed(s.scene, n) for s in setups]
+    compiled, seconds = _compile(fn, state, rung_params, field, first.spec,
+                                 frames, n)
+    compile_time += seconds
+    return compiled, rung_params, bounds
+
+  level = 0
+  compiled, rung_params, bounds = rung(level)
   positions = [np.asarray(state.x)[..., None, :, :]]
   speeds = [np.zeros(state.x.shape[:-2] + (1,), np.float32)]
   wall_time = 0.0
   for chunk in range(n_chunks):
-    start = time.perf_counter()
-    state, x, vmax, finite = jax.block_until_ready(
-        compiled(state, params, field))
-    wall_time += time.perf_counter() - start
-    x, vmax, finite = np.asarray(x), np.asarray(vmax), np.asarray(finite)
-    # The last chunk may run past the final frame; those frames are dropped
-    # unchecked.
-    keep = min(frames, first.scene.num_frames - 1 - chunk * frames)
-    for b, s in enumerate(setups):
-      check_frames(s.scene.name, 1 + chunk * frames, pick(finite, b)[:keep],
-             pick(vmax, b)[:keep], s.max_speed)
+    while True:
+      start = time.perf_counter()
+      new_state, x, vmax, finite = jax.block_until_ready(
+          compiled(state, rung_params, field))
+      wall_time += time.perf_counter() - start
+      x, vmax, finite = np.asarray(x), np.asarray(vmax), np.asarray(finite)
+      # The last chunk may run past the final frame; those frames are
+      # dropped unchecked.
+      keep = min(frames, first.scene.num_frames - 1 - chunk * frames)
+      try:
+        for b, s in enumerate(setups):
+          check_frames(s.scene.name, 1 + chunk * frames,
+                       pick(finite, b)[:keep], pick(vmax, b)[:keep],
+                       bounds[b])
+        break
+      except SpeedBoundError:
+        if level == len(SUBSTEP_LADDER) - 1:
+          raise
+        level += 1   # the chunk again, from its start, with more substeps
+        compiled, rung_params, bounds = rung(level)
+    state = new_state
     positions.append(x)
     speeds.append(vmax)
     if progress is not None:
@@ -341,7 +395,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       boundary_types=s.boundary_types,
       max_speed=pick(speeds, b)[:s.scene.num_frames],
       wall_time_s=wall_time / len(setups), compile_time_s=compile_time,
-      n_substeps=s.n_substeps) for b, s in enumerate(setups)]
+      n_substeps=s.n_substeps * SUBSTEP_LADDER[level])
+          for b, s in enumerate(setups)]
 
 
 def _check_fits(scenes: Sequence[scene_lib.Scene], chunk_frames: int):

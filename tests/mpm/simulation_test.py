@@ -159,6 +159,37 @@ class SimulationErrorTest(absltest.TestCase):
     self.assertEqual(cm.exception.frame, 2)
     mpm.check_frames("s", 1, np.ones(2, bool), np.array([0.5, 1.0]), 1.0)
 
+  def _launched(self, speed):
+    """A setup whose sand starts at ``speed`` (m/s) along the floor."""
+    s = mpm.setup(_scene("launched", num_frames=9))
+    v = s.state.v.at[:, 0].set(speed)
+    return dataclasses.replace(s, state=s.state.replace(v=v))
+
+  def test_a_particle_past_the_bound_raises_the_substeps_and_goes_on(self):
+    s = self._launched(0.0)
+    s = self._launched(1.5 * s.max_speed)
+    result = mpm.simulate_setups([s], chunk_frames=4)
+    self.assertEqual(result[0].n_substeps,
+                     2 * s.n_substeps)
+    self.assertGreater(result[0].max_speed.max(), s.max_speed)
+    # The same as a run with twice the substeps from the start.
+    twice = dataclasses.replace(
+        s, n_substeps=2 * s.n_substeps,
+        max_speed=mpm.simulation.speed_allowed(s.scene, 2 * s.n_substeps),
+        params=s.params.replace(dt=jnp.float32(s.scene.frame_dt /
+                                               (2 * s.n_substeps))))
+    np.testing.assert_array_equal(
+        result[0].positions,
+        mpm.simulate_setups([twice], chunk_frames=4)[0].positions)
+
+  def test_past_the_top_of_the_ladder_it_is_an_error(self):
+    s = self._launched(0.0)
+    top = mpm.simulation.speed_allowed(
+        s.scene, s.n_substeps * mpm.simulation.SUBSTEP_LADDER[-1])
+    with self.assertRaisesRegex(mpm.SimulationError, r"'launched', frame 1: "
+                                "particle speed .* exceeds"):
+      mpm.simulate_setups([self._launched(1.5 * top)], chunk_frames=4)
+
   def test_stable_scene_does_not_raise(self):
     result = mpm.simulate(_scene("fine"))
     self.assertTrue(np.all(result.max_speed <= mpm.setup(

@@ -14,6 +14,7 @@ import pytest
 import mpm
 from mpm import boundary
 from mpm import geometry
+from mpm import scene as scene_lib
 from mpm import solver
 from mpm import transfer
 
@@ -457,6 +458,38 @@ class GradientTest(parameterized.TestCase):
       grads = self._check(loss, x, phi, h=1e-5, rtol=1e-4)
     # Moving the obstacle downhill lets the slab go further.
     self.assertGreater(grads[0], 0.05)
+
+
+class SlopeTest(parameterized.TestCase):
+  """A layer 5 cm thick filling a box 30 cm long, gravity tilted by theta:
+  an infinite slope is at rest while tan(theta) <= mu_s (the sand's
+  friction at rest, sin(35 deg) = 0.57 for both rheologies: 29.8 deg) and
+  flows once tan(theta) passes mu_2 (mu(I): 0.83, 39.8 deg)."""
+
+  def _end_speed(self, theta_deg, rheology):
+    """Mean particle speed (m/s) over the last 10 ms of 0.4 s."""
+    scene = scene_lib.with_rheology(_flat_scene(
+        0.3, 0.2, (0.0, FLOOR + 1e-4, 0.3, FLOOR + 0.05), 0.005, 0.01,
+        boundary_friction=2.0, num_frames=41, frame_dt=0.01), rheology)
+    s = mpm.setup(scene)
+    theta = math.radians(theta_deg)
+    params = s.params.replace(gravity=jnp.asarray(
+        [G * math.sin(theta), -G * math.cos(theta)], jnp.float32))
+    _, positions, _, finite = _ROLLOUT(s.state, params, s.field, s.spec,
+                                       40, s.n_substeps)
+    self.assertTrue(np.all(finite))
+    x = np.asarray(positions)[-2:, :s.n_particles]
+    return float(np.linalg.norm(x[1] - x[0], axis=-1).mean() / 0.01)
+
+  @parameterized.product(theta_deg=(15.0, 25.0),
+                         rheology=("drucker_prager", "mu_i"))
+  def test_below_mu_s_the_slope_rests(self, theta_deg, rheology):
+    # What is left is elastic settling, millimetres per second.
+    self.assertLess(self._end_speed(theta_deg, rheology), 0.01)
+
+  @parameterized.parameters("drucker_prager", "mu_i")
+  def test_above_mu_2_the_slope_flows(self, rheology):
+    self.assertGreater(self._end_speed(45.0, rheology), 0.05)
 
 
 if __name__ == "__main__":
