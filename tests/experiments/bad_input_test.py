@@ -292,6 +292,13 @@ ROWS = (
     ("simulate_too_many_frames", "experiments.simulate",
      ["--scene={d}/long.json", "--out={d}/out/traj.h5"],
      "num_frames = 100,000,000: 1,000 particles"),
+    ("generate_unknown_rheology", "experiments.generate_dataset",
+     [TEST, "--config.dataset.rheology=mui", "--out={d}/out"],
+     "dataset.rheology = 'mui'; allowed: one of ['drucker_prager', "
+     "'mu_i']"),
+    ("convergence_unknown_rheology", "experiments.convergence",
+     ["--out={d}/out", "--rheologies=drucker_prager,mui"],
+     "--rheologies=mui: allowed: one of ['drucker_prager', 'mu_i']"),
     ("generate_spacing_too_fine", "experiments.generate_dataset",
      [TEST, "--config.dataset.spacing=0.00002", "--out={d}/out"],
      "dataset.spacing = 2e-05, dataset.num_frames = 20: 93,750,000 "
