@@ -20,13 +20,15 @@ from mpm import io as mpm_io
 
 
 def simulate_to_file(scene: mpm.Scene, out: str, seed: int = -1,
-                     chunk_frames: int = 50) -> mpm.SimulationResult:
+                     chunk_frames: int = 50,
+                     rest_speed: float | None = None) -> mpm.SimulationResult:
   """Simulates ``scene`` with a progress bar and writes the file ``out``
-  (creating its directory)."""
+  (creating its directory); ``rest_speed`` as ``mpm.simulate_setups``'."""
   with tqdm.tqdm(total=scene.num_frames - 1, unit="frame",
                  desc=scene.name) as bar:
     result = mpm.simulate(scene, chunk_frames=chunk_frames,
-                          progress=lambda done: bar.update(done - bar.n))
+                          progress=lambda done: bar.update(done - bar.n),
+                          rest_speed=rest_speed)
   os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
   mpm_io.write_trajectories(out, [mpm_io.Trajectory.from_result(result, seed)])
   return result

@@ -24,6 +24,10 @@ _OUT = flags.DEFINE_string("out", None, "Output trajectory file (.h5).")
 _CHUNK = flags.DEFINE_integer("chunk_frames", 50,
                               "Frames per compiled call (checking interval).",
                               lower_bound=1)
+_REST_SPEED = flags.DEFINE_float(
+    "rest_speed", None, "Stop stepping once no particle moved faster than "
+    "this (m/s) on average over the last 40 frames; the later frames "
+    "repeat the last one stepped (default: step every frame).")
 
 
 def main(argv):
@@ -41,15 +45,22 @@ def main(argv):
                                             chunk_frames=_CHUNK.value))
   if warning:
     print(warning, file=sys.stderr)
+  if _REST_SPEED.value is not None and not 0 < _REST_SPEED.value < 10:
+    raise runtime.InputError(f"--rest_speed={_REST_SPEED.value}: allowed: "
+                             "(0, 10) m/s")
   # Before minutes of simulating: the file must be writable at the end.
   runtime.writable("out", _OUT.value, directory=False)
   runtime.enable_compilation_cache()
   logging.info("devices: %s", jax.devices())
-  result = file_jobs.simulate_to_file(scene, _OUT.value, seed, _CHUNK.value)
+  result = file_jobs.simulate_to_file(scene, _OUT.value, seed, _CHUNK.value,
+                                      _REST_SPEED.value)
+  rested = ("" if result.rest_frame is None else
+            f", at rest from frame {result.rest_frame} (later frames repeat "
+            "it)")
   print(f"{_OUT.value}: {result.positions.shape[0]} frames, "
         f"{result.positions.shape[1]} particles, {result.n_substeps} "
         f"substeps/frame, {result.wall_time_s:.2f} s simulating "
-        f"(+{result.compile_time_s:.2f} s compiling)")
+        f"(+{result.compile_time_s:.2f} s compiling){rested}")
 
 
 if __name__ == "__main__":

@@ -185,6 +185,9 @@ class SimulationResult:
     wall_time_s: seconds simulating, compilation excluded.
     compile_time_s: seconds compiling (0 when the program was cached).
     n_substeps: substeps per frame.
+    rest_frame: the last frame stepped when the run stopped at rest
+      (``simulate_setups``' ``rest_speed``): later frames repeat it. None
+      when every frame was stepped.
   """
   scene: scene_lib.Scene
   positions: np.ndarray
@@ -194,6 +197,7 @@ class SimulationResult:
   wall_time_s: float
   compile_time_s: float
   n_substeps: int
+  rest_frame: int | None = None
 
 
 _rollout = jax.jit(solver.rollout, static_argnames=(
@@ -296,8 +300,9 @@ def _stacked(setups: Sequence[Setup], batched: bool):
 
 
 def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
-                    progress: Callable[[int], None] | None = None
-                    ) -> list[SimulationResult]:
+                    progress: Callable[[int], None] | None = None,
+                    rest_speed: float | None = None,
+                    rest_frames: int = 40) -> list[SimulationResult]:
   """Simulates scenes that share grid, frame count and substep count.
 
   One scene runs as one program; several are padded to one particle and
@@ -315,6 +320,14 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       ``scene.num_frames``, ``scene.frame_dt``.
     chunk_frames: frames per compiled call (checking granularity).
     progress: called with the number of frames finished after each chunk.
+    rest_speed: if given (m/s), the run stops stepping once no particle
+      of any scene has moved faster than this on average over the last
+      ``rest_frames`` frames (its displacement over them, so that a
+      deposit's elastic ringing does not count as motion; checked after
+      each chunk): the frames after repeat the last one stepped
+      (``SimulationResult.rest_frame``), so a deposit's last frames cost
+      nothing. None steps every frame.
+    rest_frames: the window (frames) of that average.
 
   Returns:
     Per setup, its result; ``n_substeps`` is the largest count used.
@@ -359,6 +372,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   positions = [np.asarray(state.x)[..., None, :, :]]
   speeds = [np.zeros(state.x.shape[:-2] + (1,), np.float32)]
   wall_time = 0.0
+  rest_frame = None
+  axis = 1 if batched else 0   # the frame axis of the positions
   for chunk in range(n_chunks):
     while True:
       start = time.perf_counter()
@@ -385,6 +400,19 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     speeds.append(vmax)
     if progress is not None:
       progress(min((chunk + 1) * frames, first.scene.num_frames - 1))
+    left = first.scene.num_frames - 1 - (chunk + 1) * frames
+    if rest_speed is not None and left > 0:
+      done = np.concatenate(positions, axis)
+      moved = (np.abs(np.take(done, -1, axis) -
+                      np.take(done, -1 - rest_frames, axis)).max()
+               if done.shape[axis] > rest_frames else np.inf)
+      if moved < rest_speed * rest_frames * first.scene.frame_dt:
+        rest_frame = (chunk + 1) * frames
+        positions.append(np.repeat(x[..., -1:, :, :], left, axis=-3))
+        speeds.append(np.zeros(vmax.shape[:-1] + (left,), vmax.dtype))
+        if progress is not None:
+          progress(first.scene.num_frames - 1)
+        break
 
   positions = np.concatenate(positions, 1 if batched else 0)
   speeds = np.concatenate(speeds, -1)
@@ -395,8 +423,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       boundary_types=s.boundary_types,
       max_speed=pick(speeds, b)[:s.scene.num_frames],
       wall_time_s=wall_time / len(setups), compile_time_s=compile_time,
-      n_substeps=s.n_substeps * SUBSTEP_LADDER[level])
-          for b, s in enumerate(setups)]
+      n_substeps=s.n_substeps * SUBSTEP_LADDER[level],
+      rest_frame=rest_frame) for b, s in enumerate(setups)]
 
 
 def _check_fits(scenes: Sequence[scene_lib.Scene], chunk_frames: int):

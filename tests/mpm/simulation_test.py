@@ -119,6 +119,41 @@ class BatchTest(absltest.TestCase):
       mpm.simulate_setups([a, b])
 
 
+class RestTest(absltest.TestCase):
+  """``rest_speed``: a run stops stepping once its sand rests."""
+
+  def test_a_resting_deposit_stops_stepping_and_keeps_every_frame(self):
+    scene = _scene("settles", num_frames=121)   # settles in ~0.3 s of 1.2
+    full = mpm.simulate(scene, chunk_frames=10)
+    # At rest: no particle moved more than 2 mm in the last 0.1 s.
+    rest = mpm.simulate(scene, chunk_frames=10, rest_speed=0.02,
+                        rest_frames=10)
+    self.assertIsNone(full.rest_frame)
+    self.assertIsNotNone(rest.rest_frame)
+    self.assertLess(rest.rest_frame, 80)
+    self.assertEqual(rest.positions.shape, full.positions.shape)
+    stepped = rest.rest_frame + 1
+    # The frames stepped are the full run's; the rest repeat the last one.
+    np.testing.assert_array_equal(rest.positions[:stepped],
+                                  full.positions[:stepped])
+    np.testing.assert_array_equal(
+        rest.positions[stepped:],
+        np.broadcast_to(rest.positions[stepped - 1],
+                        rest.positions[stepped:].shape))
+    window = full.positions[rest.rest_frame - 10:rest.rest_frame + 1]
+    self.assertLess(np.abs(window[-1] - window[0]).max(), 2e-3)
+    # What the skipped frames would have moved: no more than the rest speed
+    # for their duration (this soft, coarse sand still creeps: ~6 mm).
+    skipped_s = (scene.num_frames - 1 - rest.rest_frame) * scene.frame_dt
+    self.assertLess(np.abs(rest.positions[-1] - full.positions[-1]).max(),
+                    0.02 * skipped_s)
+
+  def test_sand_that_keeps_moving_is_stepped_to_the_end(self):
+    scene = _scene("moving", num_frames=21)
+    self.assertIsNone(mpm.simulate(scene, chunk_frames=10, rest_speed=1e-6,
+                                   rest_frames=5).rest_frame)
+
+
 class SimulationErrorTest(absltest.TestCase):
 
   def test_too_few_substeps_for_stiff_sand(self):
