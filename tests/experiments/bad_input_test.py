@@ -292,6 +292,9 @@ ROWS = (
     ("simulate_too_many_frames", "experiments.simulate",
      ["--scene={d}/long.json", "--out={d}/out/traj.h5"],
      "num_frames = 100,000,000: 1,000 particles"),
+    ("simulate_rest_speed_zero", "experiments.simulate",
+     ["--scene={d}/tiny.json", "--out={d}/out/traj.h5", "--rest_speed=0"],
+     "--rest_speed=0.0: allowed: (0, 10) m/s"),
     ("generate_unknown_rheology", "experiments.generate_dataset",
      [TEST, "--config.dataset.rheology=mui", "--out={d}/out"],
      "dataset.rheology = 'mui'; allowed: one of ['drucker_prager', "
