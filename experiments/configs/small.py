@@ -1,14 +1,15 @@
-"""A small problem trainable on a 2-core CPU within about an hour: coarser
-particles (spacing 0.01 m, 175-250 per scene), 60 training scenes, a smaller
-model (latent 64, 5 message-passing steps), and the long-horizon recipe."""
+"""A small problem trainable on one CPU core in about four hours: coarser
+particles (spacing 0.01 m, 175-250 per scene), the paper's 1000 training
+and 100 test trajectories, a smaller model (latent 64, 5 message-passing
+steps), and the recipe that learns rest (docs/gns.md)."""
 
 from experiments.configs import paper
 
 
 def get_config():
   config = paper.get_config()
-  config.dataset.num_train = 60
-  config.dataset.num_test = 21            # 3 of each of the 7 test groups
+  config.dataset.num_train = 1000
+  config.dataset.num_test = 100           # 14-15 of each of the 7 groups
   config.dataset.spacing = 0.01
   config.dataset.connectivity_radius = 0.03
 
@@ -18,19 +19,24 @@ def get_config():
   # The long-horizon recipe (docs/gns.md, ablation): the solids seen
   # through the SDF only, a learned step of 3 stored frames (7.5 ms), noise
   # scaled to the data's velocity std and folded into the normalisation,
-  # windows weighted toward moving sand.
+  # windows weighted toward moving sand. The noise at 0.25 of the velocity
+  # std (the resting heap's error amplitude in a rollout) makes the deposit
+  # come to rest; at 0.1 it never did (docs/gns.md, "Learning rest").
   config.model.boundary_particles = False
   config.train.frame_stride = 3
-  config.train.noise_velocity_fraction = 0.1
+  config.train.noise_velocity_fraction = 0.25
   config.train.fold_noise = True
   config.train.motion_weighting = 0.5
 
-  config.train.num_steps = 16000
+  config.train.num_steps = 40000
   config.train.lr_init = 3e-4
-  config.train.lr_decay_steps = 16000
+  config.train.lr_decay_steps = 40000
   config.train.node_bucket = 64
   config.checkpoint.every_steps = 500
-  config.checkpoint.named_steps = (4000, 8000, 12000, 16000)
+  # Kept for the shipped model, the mean of the last five (docs/gns.md):
+  # one checkpoint is one draw from a wide spread.
+  config.checkpoint.named_steps = (8000, 16000, 24000, 32000, 34000, 36000,
+                                   38000, 40000)
   config.eval.every_steps = 4000
   config.eval.num_windows = 32
   config.eval.num_rollouts = 3

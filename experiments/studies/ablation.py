@@ -37,6 +37,7 @@ ABLATION = (
     ("noise_folded", {"train.noise_velocity_fraction": 0.1,
                       "train.fold_noise": True}),
     ("motion_weighted", {"train.motion_weighting": 0.5}),
+    ("rest_noise", {"train.noise_velocity_fraction": 0.25}),
     ("pushforward", {"train.pushforward_steps": 2,
                      "train.pushforward_probability": 0.5}),
 )

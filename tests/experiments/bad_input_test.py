@@ -19,6 +19,9 @@ from tests.experiments import entry_points_test
 from tests.experiments import forked
 
 ROOT = entry_points_test.ROOT
+# The shipped model's checkpoint step (damaged in a copy below).
+SHIPPED_STEP = max(os.listdir(os.path.join(
+    ROOT, "experiments", "pretrained", "small", "checkpoints")), key=int)
 SMALL = "--config=experiments/configs/small.py"
 TEST = "--config=experiments/configs/test.py"
 _TEST_SPEC = {"num_train": 3, "num_test": 7, "num_frames": 20, "seed": 0,
@@ -345,15 +348,15 @@ ROWS = (
     # Round 3, item 5: a checkpoint whose data files were deleted.
     ("evaluate_damaged_checkpoint", "experiments.evaluate",
      ["--workdir={d}/damaged", "--data={d}", "--out={d}/out"],
-     "--workdir={d}/damaged: checkpoint {d}/damaged/checkpoints/9000 is "
+     "--workdir={d}/damaged: checkpoint {d}/damaged/checkpoints/{step} is "
      "damaged: state/ocdbt.process_0/d/* (the arrays' data) missing"),
     ("rollout_damaged_checkpoint", "experiments.rollout",
      ["--workdir={d}/damaged", "--data={d}", "--out={d}/out"],
-     "checkpoint {d}/damaged/checkpoints/9000 is damaged"),
+     "checkpoint {d}/damaged/checkpoints/{step} is damaged"),
     ("average_runs_damaged_checkpoint", "experiments.average_runs",
      ["--workdirs=experiments/pretrained/small,{d}/damaged",
       "--out={d}/out"],
-     "--workdirs={d}/damaged: checkpoint {d}/damaged/checkpoints/9000 is "
+     "--workdirs={d}/damaged: checkpoint {d}/damaged/checkpoints/{step} is "
      "damaged"),
     # Issue 29's sweep: an empty output path, too few runs to average, a
     # flag of another study than the one that runs, a zero step, a seed.
@@ -448,7 +451,7 @@ class BadInputTest(parameterized.TestCase):
     # The shipped model with its arrays' data files deleted.
     shutil.copytree(os.path.join(ROOT, "experiments", "pretrained", "small"),
                     os.path.join(d, "damaged"))
-    for path in glob.glob(os.path.join(d, "damaged", "checkpoints", "9000",
+    for path in glob.glob(os.path.join(d, "damaged", "checkpoints", SHIPPED_STEP,
                                        "state", "ocdbt.process_0", "d", "*")):
       os.remove(path)
     with open(os.path.join(d, "syntax.py"), "w") as f:
@@ -479,7 +482,7 @@ class BadInputTest(parameterized.TestCase):
     # One line, the message naming what was wrong; no traceback.
     self.assertEqual(stderr.strip(), stderr.strip().splitlines()[0], stderr)
     self.assertStartsWith(stderr, "error: ")
-    self.assertIn(expected.format(d=self.dir), stderr)
+    self.assertIn(expected.format(d=self.dir, step=SHIPPED_STEP), stderr)
     self.assertEqual(sorted(os.listdir(self.dir)), before)
     self.assertFalse(os.path.exists(os.path.join(self.dir, "other", "parts")))
     self.assertEqual(os.listdir(os.path.join(self.dir, "parts", "parts")),
