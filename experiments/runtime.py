@@ -348,7 +348,7 @@ def settings_from_flags(settings_cls: type, holders: dict[str, Any],
     values[name] = value
   settings = settings_cls(**values)
   # Refused above if it cannot fit; a job of hours is said before it starts.
-  warning = budget.plan_warning(settings.simulation_seconds())
+  warning = budget.plan_warning(settings.simulation_seconds)
   if warning:
     print(warning, file=sys.stderr)
   return settings

@@ -291,7 +291,8 @@ def with_rheology(scene: "Scene", rheology: str) -> "Scene":
   return Scene.from_dict(d)
 
 
-def _parse_rheology(md: Mapping[str, Any], density: float) -> dict[str, Any]:
+def _parse_rheology(md: Mapping[str, Any], density: float,
+                    friction_angle_deg: float) -> dict[str, Any]:
   """The material's rheology and its parameters (defaults filled in)."""
   rheology = md.get("rheology", "drucker_prager")
   if rheology not in RHEOLOGIES:
@@ -304,13 +305,11 @@ def _parse_rheology(md: Mapping[str, Any], density: float) -> dict[str, Any]:
                        "material.rheology = 'mu_i'; allowed: set it, or "
                        "leave them out")
     return {}
-  angle = _number(md, "friction_angle_deg", Material.friction_angle_deg,
-                  "material", 0.0, 80.0)
   # Default: the friction of Drucker-Prager at friction_angle_deg, which in
   # plane strain yields at tau_eq = sin(phi) p (Mohr-Coulomb in 2D), so the
   # two rheologies are the same sand at rest and differ only in the rate.
-  mu_s = _number(md, "mu_s", math.sin(math.radians(angle)), "material", 0,
-                 10, lo_open=True)
+  mu_s = _number(md, "mu_s", math.sin(math.radians(friction_angle_deg)),
+                 "material", 0, 10, lo_open=True)
   mu_2 = _number(md, "mu_2", mu_s + MU_I_DELTA, "material", 0, 10,
                  lo_open=True)
   if mu_2 <= mu_s:
@@ -472,15 +471,16 @@ def _parse_scene(d: Mapping[str, Any]) -> Scene:
                           "material", 0.0, 0.5, hi_open=True)
   _check_stiffness(md.get("youngs_modulus"), density, poisson_ratio, solver,
                    frame_dt, num_frames)
+  friction_angle_deg = _number(md, "friction_angle_deg",
+                               Material.friction_angle_deg, "material", 0.0,
+                               80.0)
   material = Material(
       density=density,
       youngs_modulus=_number(md, "youngs_modulus", Material.youngs_modulus,
                              "material", 0, MAX_YOUNGS_MODULUS, lo_open=True),
       poisson_ratio=poisson_ratio,
-      friction_angle_deg=_number(md, "friction_angle_deg",
-                                 Material.friction_angle_deg, "material",
-                                 0.0, 80.0),
-      **_parse_rheology(md, density))
+      friction_angle_deg=friction_angle_deg,
+      **_parse_rheology(md, density, friction_angle_deg))
 
   return Scene(
       domain=domain, ramp=ramp, obstacles=obstacles, granular=granular,

@@ -16,6 +16,7 @@ entry points derive their flags from these fields
 """
 
 import dataclasses
+import functools
 import math
 import os
 import typing
@@ -133,7 +134,7 @@ class Base:
   def __post_init__(self):
     check_fields(self)
     self.validate()
-    budget.check_plan(self.simulations())
+    self.simulation_seconds  # pylint: disable=pointless-statement (checks)
 
   def validate(self) -> None:
     """Relations between fields; raises InputError naming the flags."""
@@ -144,8 +145,10 @@ class Base:
     machine's memory; none by default."""
     return []
 
+  @functools.cached_property
   def simulation_seconds(self) -> float:
-    """The estimated CPU seconds of :meth:`simulations`."""
+    """The estimated CPU seconds of :meth:`simulations` (checked once, on
+    construction: ``budget.check_plan`` refuses what cannot fit)."""
     return budget.check_plan(self.simulations())
 
   def to_dict(self) -> dict[str, Any]:
