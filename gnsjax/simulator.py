@@ -152,17 +152,29 @@ def step(predictor, params, graph: Graph, context: Context, radius: float,
 
 
 def add_noise(key: jax.Array, window: jax.Array, moving: jax.Array,
-              noise_std: float) -> tuple[jax.Array, jax.Array]:
+              noise_std: float, solids: geometry.SDFGrid | None = None
+              ) -> tuple[jax.Array, jax.Array]:
   """Noisy inputs [C, N, 2] and the adjusted target [N, 2] of a window.
+
+  The target moves with the last input frame's noise (the model undoes the
+  velocity noise, not the position's). Noise that carries a particle at a
+  wall into the solid carries its target there too, so the model learns
+  that sand may sit inside a solid. With ``solids`` the adjusted target is
+  pushed back out to the surface (``constrain``'s push): the model learns
+  to step out of a solid it finds itself in.
 
   Args:
     window: [C + 1, N, 2], the inputs then the target.
     moving: bool [N]; only moving particles get noise.
+    solids: the scene's signed distance field, or None (targets unchanged).
   """
   inputs, target = window[:-1], window[-1]
   n = noise_lib.random_walk(key, inputs.shape, noise_std)
   n = n * moving[None, :, None]
-  return inputs + n, noise_lib.adjust_target(target, n)
+  target = noise_lib.adjust_target(target, n)
+  if solids is not None:
+    target, _, _ = constrain(target, target, moving, solids)
+  return inputs + n, target
 
 
 def loss(model, params, graph: Graph, target: jax.Array, context: Context,

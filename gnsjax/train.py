@@ -112,11 +112,15 @@ class Trainer:
     ctx, radius = problem.context, problem.radius
     noise_std = problem.noise_std
 
-    def prepare(key, positions, moving):
+    outside = config.train.target_outside_solids
+
+    def prepare(key, positions, moving, solids):
       keys = jax.random.split(key, positions.shape[0])
-      return jax.vmap(functools.partial(simulator.add_noise,
-                                        noise_std=noise_std))(
-                                            keys, positions, moving)
+      add = functools.partial(simulator.add_noise, noise_std=noise_std)
+      if not outside:
+        return jax.vmap(add)(keys, positions, moving)
+      return jax.vmap(lambda k, x, m, s: add(k, x, m, solids=s))(
+          keys, positions, moving, solids)
 
     def batch_loss(params, graphs: simulator.Graph, target):
       per_window = jax.vmap(
@@ -262,7 +266,7 @@ class Trainer:
     start = 0 if pushforward else extra
     window = positions[:, start:start + c + 1]
     if noise:
-      inputs, target = self.prepare(key, window, moving)
+      inputs, target = self.prepare(key, window, moving, solids)
     else:
       inputs, target = window[:, :-1], window[:, -1]
     if pushforward:

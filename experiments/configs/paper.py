@@ -58,6 +58,9 @@ def get_config() -> ml_collections.ConfigDict:
   # inputs this many steps on (no gradient) and learns from its own output.
   config.train.pushforward_steps = 0
   config.train.pushforward_probability = 0.0
+  # Noisy targets pushed out of the solids (simulator.add_noise): the model
+  # learns to step out of a solid instead of staying inside.
+  config.train.target_outside_solids = False
   # Gather training windows on the device from the whole split stored there
   # (batching.DeviceWindows) instead of reading them on the host; needs
   # model.boundary_particles = False.

@@ -13,6 +13,7 @@ import time
 
 from absl.testing import absltest
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 import mpm
@@ -384,6 +385,36 @@ class PushforwardTest(fixtures.TinyRunTestCase):
     graphs, target = trainer.batch_arrays(batch, None, noise=False)
     np.testing.assert_array_equal(graphs.positions, batch.positions[:, p:-1])
     np.testing.assert_array_equal(target, batch.positions[:, -1])
+
+
+class TargetOutsideSolidsTest(fixtures.TinyRunTestCase):
+
+  def test_the_flag_pushes_noisy_targets_out_and_changes_nothing_else(self):
+    out = {}
+    for flag in (False, True):
+      # Noise of 3 mm per step: sand near the ramp ends up inside it.
+      config = fixtures.tiny_config(noise_std=3e-3,
+                                    target_outside_solids=flag)
+      problem = run_lib.load_problem(self.data, config)
+      trainer = train.Trainer(config, problem)
+      with data.WindowDataset(data.split_path(self.data, "train"),
+                              input_frames=problem.input_frames,
+                              seed=0) as ds:
+        batch = trainer.make_batch([ds[0], ds[1]])
+      graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
+      out[flag] = np.asarray(graphs.positions), np.asarray(target)
+    np.testing.assert_array_equal(out[True][0], out[False][0])
+    inside = np.zeros(batch.moving.shape, bool)
+    for b in range(len(inside)):
+      solids = geometry.SDFGrid(jnp.asarray(batch.solids[b]),
+                                problem.sdf_spacing)
+      before, _ = geometry.sample_sdf(solids, jnp.asarray(out[False][1][b]))
+      after, _ = geometry.sample_sdf(solids, jnp.asarray(out[True][1][b]))
+      inside[b] = batch.moving[b] & (np.asarray(before) < 0)
+      np.testing.assert_array_less(-1e-5, np.asarray(after)[batch.moving[b]])
+    self.assertGreater(inside.sum(), 0)
+    np.testing.assert_array_equal(out[True][1][~inside],
+                                  out[False][1][~inside])
 
 
 class DataParallelTest(absltest.TestCase):
