@@ -187,3 +187,35 @@ def project_particles(field: BoundaryField, st: transfer.Stencil,
   inv = jax.lax.rsqrt(jnp.where(g_sq > 0, g_sq, 1.0)) * (g_sq > 0)
   # phi_new is first-order accurate, so the push divides by |grad| once more.
   return geometry.push_out(x_new, phi_new * inv, grad * inv[:, None])
+
+
+def window(field: BoundaryField, spec: transfer.GridSpec,
+           size: tuple[int, int], window_at: jax.Array) -> BoundaryField:
+  """The field on a window of the grid (``solver.advance_windowed``).
+
+  Args:
+    field: the whole grid's.
+    spec: the whole grid.
+    size: (wx, wy) nodes of the window (static).
+    window_at: int32 [2], the grid node at the window's node (0, 0).
+
+  Returns:
+    The field indexed in the window: entries outside it (and padding) point
+    at node wx * wy, one past the window's nodes, which the grid of a
+    windowed substep adds and no particle reaches, with zero weights; phi
+    [wx * wy + 1] is the window's slice (the extra node's value unused).
+  """
+  wx, wy = size
+  i = field.index // spec.shape[1] - window_at[0]
+  j = field.index % spec.shape[1] - window_at[1]
+  inside = (field.index > 0) & (i >= 0) & (i < wx) & (j >= 0) & (j < wy)
+  keep = inside.astype(field.solid_weight.dtype)
+  phi = jax.lax.dynamic_slice(field.phi.reshape(spec.shape),
+                              (window_at[0], window_at[1]), size).reshape(-1)
+  return BoundaryField(
+      index=jnp.where(inside, i * wy + j, wx * wy).astype(jnp.int32),
+      solid_normal=field.solid_normal,
+      solid_weight=field.solid_weight * keep,
+      wall_normal=field.wall_normal,
+      wall_weight=field.wall_weight * keep[:, None],
+      phi=jnp.concatenate([phi, phi[:1]]))

@@ -19,6 +19,7 @@ import numpy as np
 from mpm import boundary
 from mpm import constitutive
 from mpm import geometry
+from mpm import resolution
 from mpm import scene as scene_lib
 from mpm import solver
 from mpm import transfer
@@ -188,6 +189,8 @@ class SimulationResult:
     rest_frame: the last frame stepped when the run stopped at rest
       (``simulate_setups``' ``rest_speed``): later frames repeat it. None
       when every frame was stepped.
+    resolution: the spacing ``simulate``'s ``front_tolerance`` picked and
+      why (``mpm.resolution.Resolution``), or None.
   """
   scene: scene_lib.Scene
   positions: np.ndarray
@@ -198,6 +201,7 @@ class SimulationResult:
   compile_time_s: float
   n_substeps: int
   rest_frame: int | None = None
+  resolution: "resolution.Resolution | None" = None
 
 
 _rollout = jax.jit(solver.rollout, static_argnames=(
@@ -205,6 +209,55 @@ _rollout = jax.jit(solver.rollout, static_argnames=(
 _batched_rollout = jax.jit(
     jax.vmap(solver.rollout, in_axes=(0, 0, 0, None, None, None)),
     static_argnums=(3, 4, 5))
+
+_windowed_rollout = jax.jit(solver.rollout_windowed, static_argnames=(
+    "spec", "size", "n_frames", "n_substeps"))
+_batched_windowed_rollout = jax.jit(
+    jax.vmap(solver.rollout_windowed, in_axes=(0, 0, 0, None, None, None,
+                                               None)),
+    static_argnums=(3, 4, 5, 6))
+
+# Window sizes per axis: multiples of an eighth of the grid (at least 8
+# nodes), so a run compiles for a few sizes at most.
+WINDOW_STEPS = 8
+# A window that would cover this fraction of the grid's nodes or more: the
+# whole grid instead (one program fewer, nothing to save).
+WINDOW_MAX_FRACTION = 0.6
+
+
+def window_size(spec: transfer.GridSpec, extent: np.ndarray,
+                reach: np.ndarray) -> tuple[int, int] | None:
+  """The grid window (nodes per axis) for sand of ``extent`` [2] (m) that
+  may grow by ``reach`` [2] (m) on each side within one frame and spread
+  over a chunk: the extent plus the reach plus the stencil, rounded up to
+  the ladder; None when the whole grid is about as cheap."""
+  need = np.ceil((np.asarray(extent) + 2 * np.asarray(reach)) / spec.dx) + 6
+  size = []
+  for n, full in zip(need, spec.shape):
+    step = max(8, -(-full // WINDOW_STEPS))
+    size.append(int(min(full, -(-int(n) // step) * step)))
+  if size[0] * size[1] >= WINDOW_MAX_FRACTION * spec.n_nodes:
+    return None
+  return tuple(size)
+
+
+def _larger(spec: transfer.GridSpec,
+            size: tuple[int, int]) -> tuple[int, int] | None:
+  """The window two ladder steps larger on each axis (None: the grid)."""
+  grown = tuple(min(full, n + 2 * max(8, -(-full // WINDOW_STEPS)))
+                for n, full in zip(size, spec.shape))
+  if grown[0] * grown[1] >= WINDOW_MAX_FRACTION * spec.n_nodes:
+    return None
+  return grown
+
+
+def _extent(state: solver.MPMState) -> np.ndarray:
+  """[..., 2] the sand's bounding-box size (m), per scene."""
+  x, active = np.asarray(state.x), np.asarray(state.volume) > 0
+  lo = np.where(active[..., None], x, np.inf).min(-2)
+  hi = np.where(active[..., None], x, -np.inf).max(-2)
+  return hi - lo
+
 
 # Compiled chunk programs by (function, static args, argument shapes).
 _compiled: dict = {}
@@ -302,7 +355,8 @@ def _stacked(setups: Sequence[Setup], batched: bool):
 def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
                     progress: Callable[[int], None] | None = None,
                     rest_speed: float | None = None,
-                    rest_frames: int = 40) -> list[SimulationResult]:
+                    rest_frames: int = 40,
+                    grid_window: bool = True) -> list[SimulationResult]:
   """Simulates scenes that share grid, frame count and substep count.
 
   One scene runs as one program; several are padded to one particle and
@@ -328,6 +382,12 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       (``SimulationResult.rest_frame``), so a deposit's last frames cost
       nothing. None steps every frame.
     rest_frames: the window (frames) of that average.
+    grid_window: the grid work follows the sand: each frame updates only a
+      window of the grid around it (``solver.rollout_windowed``), its size
+      chosen per chunk from the sand's extent and reach (``window_size``);
+      a chunk in which a particle's stencil leaves the window runs again on
+      a larger one. The positions are the whole grid's, bit for bit. False:
+      every substep updates the whole grid.
 
   Returns:
     Per setup, its result; ``n_substeps`` is the largest count used.
@@ -347,12 +407,12 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   batched = len(setups) > 1
   state, params, field = _stacked(setups, batched)
   n_chunks, frames = chunking(first.scene.num_frames, chunk_frames)
-  fn = _batched_rollout if batched else _rollout
   pick = lambda a, b: a[b] if batched else a
   compile_time = 0.0
 
-  def rung(k):
-    """(compiled chunk, params, per-setup speed bounds) at ladder rung k."""
+  def rung(k, size):
+    """(compiled chunk, params, per-setup speed bounds) at ladder rung k,
+    on a grid window of ``size`` nodes (None: the whole grid)."""
     nonlocal compile_time
     n = first.n_substeps * SUBSTEP_LADDER[k]
     if k == 0:
@@ -362,28 +422,49 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       rung_params = params.replace(
           dt=jnp.asarray(dt if batched else dt[0], jnp.float32))
       bounds = [speed_allowed(s.scene, n) for s in setups]
+    if size is None:
+      fn, static = (_batched_rollout if batched else _rollout), ()
+    else:
+      fn = _batched_windowed_rollout if batched else _windowed_rollout
+      static = (size,)
     compiled, seconds = _compile(fn, state, rung_params, field, first.spec,
-                                 frames, n)
+                                 *static, frames, n)
     compile_time += seconds
     return compiled, rung_params, bounds
 
   level = 0
-  compiled, rung_params, bounds = rung(level)
   positions = [np.asarray(state.x)[..., None, :, :]]
   speeds = [np.zeros(state.x.shape[:-2] + (1,), np.float32)]
   wall_time = 0.0
   rest_frame = None
   axis = 1 if batched else 0   # the frame axis of the positions
+  extent = _extent(state).reshape(-1, 2).max(0)
+  growth = np.zeros(2)         # how much the sand spread in the last chunk
+  size_before = None
   for chunk in range(n_chunks):
+    size = None
+    if grid_window:
+      reach = max(s.max_speed for s in setups) * SUBSTEP_LADDER[level] * (
+          first.scene.frame_dt) + growth
+      wanted = window_size(first.spec, extent, reach)
+      # Never smaller than the last chunk's: a deposit rarely shrinks much,
+      # and each new size is one more program to compile.
+      size = None if (wanted is None or (chunk and size_before is None)) else (
+          wanted if size_before is None else
+          tuple(map(max, wanted, size_before)))
     while True:
+      compiled, rung_params, bounds = rung(level, size)
       start = time.perf_counter()
-      new_state, x, vmax, finite = jax.block_until_ready(
-          compiled(state, rung_params, field))
+      out = jax.block_until_ready(compiled(state, rung_params, field))
       wall_time += time.perf_counter() - start
+      new_state, x, vmax, finite = out[:4]
       x, vmax, finite = np.asarray(x), np.asarray(vmax), np.asarray(finite)
       # The last chunk may run past the final frame; those frames are
       # dropped unchecked.
       keep = min(frames, first.scene.num_frames - 1 - chunk * frames)
+      if size is not None and np.asarray(out[4])[..., :keep].any():
+        size = _larger(first.spec, size)  # the chunk again, on more grid
+        continue
       try:
         for b, s in enumerate(setups):
           check_frames(s.scene.name, 1 + chunk * frames,
@@ -394,8 +475,9 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
         if level == len(SUBSTEP_LADDER) - 1:
           raise
         level += 1   # the chunk again, from its start, with more substeps
-        compiled, rung_params, bounds = rung(level)
-    state = new_state
+    state, size_before = new_state, size
+    grown = _extent(state).reshape(-1, 2).max(0)
+    growth, extent = np.maximum(grown - extent, 0.0), grown
     positions.append(x)
     speeds.append(vmax)
     if progress is not None:
@@ -436,17 +518,32 @@ def _check_fits(scenes: Sequence[scene_lib.Scene], chunk_frames: int):
                     memory_bytes=memory, memory_source=source)
 
 
-def simulate(scene: scene_lib.Scene, **kwargs) -> SimulationResult:
+def simulate(scene: scene_lib.Scene, *,
+             front_tolerance: float | None = None,
+             **kwargs) -> SimulationResult:
   """Simulates ``scene.num_frames`` frames of one scene.
 
-  Keyword arguments are those of :func:`simulate_setups`.
+  Args:
+    front_tolerance: None, or the largest front error the caller accepts
+      (a fraction of the runout distance): the scene then runs at the
+      cheapest particle spacing the speed/accuracy study measured to meet
+      it (``mpm.resolution.choose``); the result's ``scene`` is the scene
+      at that spacing and its ``resolution`` says which and why.
+    **kwargs: those of :func:`simulate_setups`.
 
   Raises:
     InputError: before any work, if the scene cannot fit the device's
-      memory (``mpm.budget.check_fits``: the estimate and what would fit).
+      memory (``mpm.budget.check_fits``: the estimate and what would fit),
+      or no measured spacing meets ``front_tolerance`` (the message names
+      the smallest tolerance that can be met).
   """
+  chosen = None
+  if front_tolerance is not None:
+    chosen = resolution.choose(scene, front_tolerance)
+    scene = resolution.at_spacing(scene, chosen.spacing)
   _check_fits([scene], kwargs.get("chunk_frames", 50))
-  return simulate_setups([setup(scene)], **kwargs)[0]
+  result = simulate_setups([setup(scene)], **kwargs)[0]
+  return dataclasses.replace(result, resolution=chosen)
 
 
 def simulate_batch(scenes: Sequence[scene_lib.Scene],

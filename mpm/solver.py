@@ -81,8 +81,14 @@ def init_state(x: jax.Array, volume: jax.Array) -> MPMState:
 
 
 def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
-            spec: transfer.GridSpec) -> tuple[MPMState, jax.Array]:
+            spec: transfer.GridSpec, window_at: jax.Array | None = None
+            ) -> tuple[MPMState, jax.Array]:
   """Advances by one substep ``params.dt``.
+
+  Args:
+    window_at: None, or int32 [2]: ``spec`` is then a window of the grid
+      at that node and ``field`` is ``boundary.window``'s (the grid gets one
+      extra node, where the field's entries outside the window point).
 
   Returns:
     The new state and the largest particle speed squared [] (m^2/s^2).
@@ -94,12 +100,13 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   active = (state.volume > 0).astype(state.x.dtype)
   mass = params.density * state.volume
 
-  st = transfer.stencil(state.x, spec)
+  st = transfer.stencil(state.x, spec, window_at)
   tau = constitutive.kirchhoff_stress(state.F, mu, lam)
   # MLS-MPM: the stress enters as an affine momentum, -dt V 4/dx^2 tau.
   affine = ((-dt * 4.0 / spec.dx**2) * state.volume[:, None, None] * tau +
             mass[:, None, None] * state.C)
-  grid = transfer.p2g(st, mass, mass[:, None] * state.v, affine, spec.n_nodes)
+  grid = transfer.p2g(st, mass, mass[:, None] * state.v, affine,
+                      spec.n_nodes + (window_at is not None))
 
   grid_v = transfer.grid_velocity(grid, _MIN_NODE_MASS * jnp.max(mass))
   grid_v = grid_v + dt * params.gravity[None, :]
@@ -136,6 +143,80 @@ def advance(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   state, vmax_sq = jax.lax.fori_loop(
       0, n_substeps, body, (state, jnp.zeros((), state.x.dtype)))
   return state, jnp.sqrt(vmax_sq)
+
+
+def window_start(state: MPMState, spec: transfer.GridSpec,
+                 size: tuple[int, int]) -> jax.Array:
+  """int32 [2]: the grid node where a window of ``size`` nodes centred on
+  the sand's bounding box starts, kept inside the grid."""
+  active = (state.volume > 0)[:, None]
+  x = jax.lax.stop_gradient(state.x)
+  lo = jnp.min(jnp.where(active, x, jnp.inf), 0)
+  hi = jnp.max(jnp.where(active, x, -jnp.inf), 0)
+  origin = jnp.asarray(spec.origin, x.dtype)
+  centre = ((lo + hi) / 2 - origin) / spec.dx
+  start = jnp.round(centre - jnp.asarray(size, x.dtype) / 2).astype(jnp.int32)
+  return jnp.clip(start, 0, jnp.asarray(spec.shape) - jnp.asarray(size))
+
+
+def _spills(state: MPMState, spec: transfer.GridSpec, size: tuple[int, int],
+            window_at: jax.Array) -> jax.Array:
+  """[] bool: a particle's stencil reaches past the window's nodes."""
+  xg = (state.x - jnp.asarray([spec.origin], state.x.dtype)) / spec.dx
+  base = jnp.floor(xg - 0.5).astype(jnp.int32) - window_at[None, :]
+  out = (base < 0) | (base > jnp.asarray(size)[None, :] - 3)
+  return jnp.any(out.any(-1) & (state.volume > 0))
+
+
+def advance_windowed(state: MPMState, params: SimParams,
+                     field: boundary.BoundaryField, spec: transfer.GridSpec,
+                     size: tuple[int, int], n_substeps: int):
+  """``advance`` on a window of ``size`` nodes (static) of the grid, centred
+  on the sand at the frame's start: the grid work follows the sand.
+
+  While every particle's stencil stays in the window the result is
+  ``advance``'s, bit for bit (nodes outside it get no mass, and the
+  boundary conditions there act on nothing).
+
+  Returns:
+    The new state, the largest speed [] (m/s) and whether a stencil left
+    the window [] bool (then the frame is not the whole grid's: the caller
+    runs it again on a larger window).
+  """
+  window_at = window_start(state, spec, size)
+  window_spec = transfer.GridSpec(spec.dx, tuple(size), spec.origin)
+  window_field = boundary.window(field, spec, size, window_at)
+
+  def body(_, carry):
+    s, vmax_sq, spilled = carry
+    spilled = spilled | _spills(s, spec, size, window_at)
+    s, v_sq = substep(s, params, window_field, window_spec, window_at)
+    return s, jnp.maximum(vmax_sq, v_sq), spilled
+
+  state, vmax_sq, spilled = jax.lax.fori_loop(
+      0, n_substeps, body,
+      (state, jnp.zeros((), state.x.dtype), jnp.zeros((), bool)))
+  return state, jnp.sqrt(vmax_sq), spilled
+
+
+def rollout_windowed(state: MPMState, params: SimParams,
+                     field: boundary.BoundaryField, spec: transfer.GridSpec,
+                     size: tuple[int, int], n_frames: int, n_substeps: int):
+  """``rollout`` with each frame on a window of ``size`` grid nodes that
+  follows the sand (``advance_windowed``).
+
+  Returns:
+    As ``rollout``, and spilled [T] bool: a stencil left the window during
+    the frame (that frame and the later ones are not the whole grid's).
+  """
+  def frame(s, _):
+    s, vmax, spilled = advance_windowed(s, params, field, spec, size,
+                                        n_substeps)
+    return s, (s.x, vmax, jnp.all(jnp.isfinite(s.x)), spilled)
+
+  state, (positions, max_speed, finite, spilled) = jax.lax.scan(
+      frame, state, None, length=n_frames)
+  return state, positions, max_speed, finite, spilled
 
 
 def rollout(state: MPMState, params: SimParams, field: boundary.BoundaryField,

@@ -69,8 +69,16 @@ class Stencil:
   offset: jax.Array
 
 
-def stencil(x: jax.Array, spec: GridSpec) -> Stencil:
-  """Stencil of particles at ``x`` [N, 2] (m)."""
+def stencil(x: jax.Array, spec: GridSpec,
+            window_at: jax.Array | None = None) -> Stencil:
+  """Stencil of particles at ``x`` [N, 2] (m).
+
+  Args:
+    window_at: int32 [2], or None: ``spec`` is then a window of a larger
+      grid with the same origin and dx, whose node (0, 0) is that grid's
+      node ``window_at`` (indices are the window's; weights and offsets, computed
+      in the larger grid's frame, are bit for bit the same).
+  """
   inv_dx = 1.0 / spec.dx
   xg = (x - jnp.asarray([spec.origin], x.dtype)) * inv_dx
   base = jnp.floor(xg - 0.5)
@@ -85,6 +93,8 @@ def stencil(x: jax.Array, spec: GridSpec) -> Stencil:
                       jnp.broadcast_to(oy[:, None, :], (x.shape[0], 3, 3))],
                      -1).reshape(-1, 9, 2)
   b = base.astype(jnp.int32)
+  if window_at is not None:
+    b = b - window_at[None, :]
   oi = jnp.arange(3, dtype=jnp.int32)
   index = ((b[:, :1, None] + oi[None, :, None]) * spec.shape[1] +
            b[:, 1:, None] + oi[None, None, :]).reshape(-1, 9)

@@ -7,6 +7,7 @@
       --read_data=data/small
   python -m experiments.benchmarks --what=design --out=docs/benchmarks
   python -m experiments.benchmarks --what=batch --out=docs/benchmarks
+  python -m experiments.benchmarks --what=window --out=docs/benchmarks
   python -m experiments.benchmarks --what=gpu --out=DIR \\
       [--gpu_parts=mpm,gns,train] [--cpu_reference=FILE]
   python -m experiments.benchmarks --what=mpm,gns --quick ...   # smoke test
@@ -44,9 +45,11 @@ from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import gpu_benchmark
 from experiments.benchmarks import input_benchmark
 from experiments.benchmarks import mpm_benchmark
+from experiments.benchmarks import window_benchmark
 
 FLAGS = flags.FLAGS
-BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch", "gpu")
+BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch", "window",
+              "gpu")
 GPU_PARTS = gpu_benchmark.PARTS + ("report",)
 
 _OUT = flags.DEFINE_string(
@@ -185,6 +188,8 @@ def main(argv):
       "input": lambda: input_benchmark.run_benchmark(
           _READ_DATA.value, out, quick=quick),
       "batch": lambda: batch_benchmark.run_benchmark(
+          out, quick=quick, log=logging.info),
+      "window": lambda: window_benchmark.run_benchmark(
           out, quick=quick, log=logging.info),
       "gpu": lambda: (
           gpu_benchmark.report_all(out, quick=quick,
