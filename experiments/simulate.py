@@ -2,6 +2,7 @@
 
   python -m experiments.simulate --scene=scene.json --out=traj.h5
   python -m experiments.simulate --seed=7 --out=traj.h5   # a Table 1 scene
+  python -m experiments.simulate --seed=7 --front_tolerance=0.1 --out=...
 """
 
 import sys
@@ -13,6 +14,7 @@ import jax
 
 import mpm
 from mpm import budget
+from mpm import resolution
 from experiments import runtime
 from experiments import file_jobs
 
@@ -28,6 +30,11 @@ _REST_SPEED = flags.DEFINE_float(
     "rest_speed", None, "Stop stepping once no particle moved faster than "
     "this (m/s) on average over the last 40 frames; the later frames "
     "repeat the last one stepped (default: step every frame).")
+_FRONT_TOLERANCE = flags.DEFINE_float(
+    "front_tolerance", None, "Instead of the scene's spacing: the largest "
+    "front error accepted (a fraction of the runout, e.g. 0.1); the scene "
+    "runs at the cheapest spacing the speed/accuracy study measured to "
+    "meet it (docs/tradeoff.md), and the choice is printed.")
 
 
 def main(argv):
@@ -39,6 +46,10 @@ def main(argv):
   else:
     scene = mpm.Scene.load(runtime.existing_file("scene", _SCENE.value))
     seed = -1
+  if _FRONT_TOLERANCE.value is not None:
+    chosen = resolution.choose(scene, _FRONT_TOLERANCE.value)
+    scene = resolution.at_spacing(scene, chosen.spacing)
+    print(f"--front_tolerance={_FRONT_TOLERANCE.value:g}: {chosen.reason}")
   # Before any work: what cannot fit this machine's memory is refused, what
   # takes hours said (with the estimate).
   warning = budget.warning(budget.check_fits(scene,

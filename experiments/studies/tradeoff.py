@@ -43,6 +43,7 @@ from gnsjax import tradeoff
 from mpm import budget
 from mpm import dataset
 from mpm import io as mpm_io
+from mpm.resolution import at_spacing  # the study's rule, shipped with mpm
 
 # Lines across the ramp (x, m) whose passing sand is counted over time.
 LINES = (1.2, 1.0, 0.8, 0.6, 0.4)
@@ -59,18 +60,6 @@ def study_scenes(count: int, num_frames: int = 600) -> list[mpm.Scene]:
                              num_frames=num_frames,
                              spacing=dataset.PAPER_SPACING)
   return [p.scene for p in dataset.plan(spec) if p.split == "test"]
-
-
-def at_spacing(scene: mpm.Scene, spacing: float) -> mpm.Scene:
-  """``scene`` at another particle spacing: the same sand area (particle
-  count scaled by (old / new)^2), grid spacing twice the particle spacing."""
-  d = scene.to_dict()
-  old = scene.granular.spacing
-  d["granular"]["spacing"] = spacing
-  d["granular"]["num_particles"] = max(1, int(round(
-      scene.granular.num_particles * (old / spacing)**2)))
-  d["solver"]["dx"] = 2 * spacing
-  return mpm.Scene.from_dict(d)
 
 
 def compare_frames(num_frames: int, predicted: Sequence[Sequence[int]] = ()

@@ -298,6 +298,10 @@ ROWS = (
     ("simulate_rest_speed_zero", "experiments.simulate",
      ["--scene={d}/tiny.json", "--out={d}/out/traj.h5", "--rest_speed=0"],
      "--rest_speed=0.0: allowed: (0, 10) m/s"),
+    ("simulate_front_tolerance_unmet", "experiments.simulate",
+     ["--scene={d}/tiny.json", "--out={d}/out/traj.h5",
+      "--front_tolerance=0.001"],
+     "front_tolerance = 0.001: no configuration meets front_error <= 0.001"),
     ("generate_unknown_rheology", "experiments.generate_dataset",
      [TEST, "--config.dataset.rheology=mui", "--out={d}/out"],
      "dataset.rheology = 'mui'; allowed: one of ['drucker_prager', "
