@@ -546,12 +546,42 @@ def simulate(scene: scene_lib.Scene, *,
   return dataclasses.replace(result, resolution=chosen)
 
 
-def simulate_batch(scenes: Sequence[scene_lib.Scene],
-                   **kwargs) -> list[SimulationResult]:
-  """Simulates several scenes in one vmapped program.
+# Scenes whose particle counts differ by at most this factor share a
+# vmapped program (``simulate_batch``): padding a scene to a bucket's
+# largest costs at most this much more than its own size.
+BUCKET_RATIO = 1.25
 
-  The substep count is the largest any scene needs, so every scene keeps its
-  CFL bound. Keyword arguments are those of :func:`simulate_setups`.
+
+def size_buckets(counts: Sequence[int],
+                 ratio: float = BUCKET_RATIO) -> list[list[int]]:
+  """Indices of ``counts`` grouped so that in each group the largest is at
+  most ``ratio`` times the smallest (greedy over the sorted counts, which
+  gives the fewest such groups)."""
+  order = sorted(range(len(counts)), key=lambda i: counts[i])
+  groups: list[list[int]] = []
+  for i in order:
+    if groups and counts[i] <= ratio * counts[groups[-1][0]]:
+      groups[-1].append(i)
+    else:
+      groups.append([i])
+  return groups
+
+
+def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
+                   bucket_ratio: float | None = BUCKET_RATIO,
+                   **kwargs) -> list[SimulationResult]:
+  """Simulates several scenes, as vmapped programs over scenes of similar
+  size.
+
+  The scenes are grouped by particle count (``size_buckets``: within a
+  group the largest has at most ``bucket_ratio`` times the smallest's
+  particles); each group runs as one vmapped program, padded to its
+  largest, with the largest substep count any of its scenes needs, so every
+  scene keeps its CFL bound. ``bucket_ratio=None``: all scenes in one
+  program. Other keyword arguments are those of :func:`simulate_setups`.
+
+  Returns:
+    The results in the order of ``scenes``.
 
   Raises:
     InputError: before any work, if the batch cannot fit the device's
@@ -559,13 +589,21 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene],
   """
   _check_fits(scenes, kwargs.get("chunk_frames", 50))
   setups = [setup(s) for s in scenes]
-  n_substeps = max(s.n_substeps for s in setups)
-  setups = [dataclasses.replace(
-      s, n_substeps=n_substeps,
-      params=s.params.replace(dt=jnp.asarray(s.scene.frame_dt / n_substeps,
-                                             jnp.float32)))
-            for s in setups]
-  return simulate_setups(setups, **kwargs)
+  if bucket_ratio is None:
+    groups = [list(range(len(setups)))]
+  else:
+    groups = size_buckets([s.n_particles for s in setups], bucket_ratio)
+  results: list[SimulationResult | None] = [None] * len(setups)
+  for group in groups:
+    members = [setups[i] for i in group]
+    n_substeps = max(s.n_substeps for s in members)
+    members = [dataclasses.replace(
+        s, n_substeps=n_substeps,
+        params=s.params.replace(dt=jnp.asarray(
+            s.scene.frame_dt / n_substeps, jnp.float32))) for s in members]
+    for i, result in zip(group, simulate_setups(members, **kwargs)):
+      results[i] = result
+  return results
 
 
 # ------------------------------------------------------- batch sizing ---

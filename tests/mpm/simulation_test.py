@@ -88,7 +88,8 @@ class BatchTest(absltest.TestCase):
                material={"density": 1500.0, "youngs_modulus": 1e5,
                          "poisson_ratio": 0.3, "friction_angle_deg": 25.0}),
     ]
-    batch = mpm.simulate_batch(scenes)
+    # One program for both (no size buckets): the padding is exercised.
+    batch = mpm.simulate_batch(scenes, bucket_ratio=None)
     for scene, result in zip(scenes, batch):
       single = mpm.simulate(scene)
       self.assertEqual(result.scene, scene)
@@ -101,6 +102,35 @@ class BatchTest(absltest.TestCase):
       np.testing.assert_allclose(result.max_speed, single.max_speed,
                                  atol=1e-5, rtol=0)
     self.assertNotEqual(batch[0].positions.shape, batch[1].positions.shape)
+
+  def test_size_buckets_are_the_fewest_groups_within_the_ratio(self):
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+      counts = list(rng.integers(100, 400, rng.integers(1, 9)))
+      groups = mpm.simulation.size_buckets(counts, 1.25)
+      self.assertEqual(sorted(i for g in groups for i in g),
+                       list(range(len(counts))))
+      for g in groups:
+        self.assertLessEqual(max(counts[i] for i in g),
+                             1.25 * min(counts[i] for i in g))
+      # Brute force: the fewest groups is the fewest intervals of the
+      # sorted counts that each start at a count and span 1.25x.
+      fewest, covered = 0, -1
+      for c in sorted(counts):
+        if c > covered:
+          fewest, covered = fewest + 1, 1.25 * c
+      self.assertEqual(len(groups), fewest)
+
+  def test_buckets_of_a_batch_come_back_in_order(self):
+    scenes = [_scene("big", box=(0.05, 0.12, 0.25, 0.22)),
+              _scene("small", box=(0.1, 0.12, 0.2, 0.18)),
+              _scene("big2", box=(0.06, 0.12, 0.26, 0.22))]
+    results = mpm.simulate_batch(scenes)
+    self.assertEqual([r.scene.name for r in results], ["big", "small", "big2"])
+    for scene, result in zip(scenes, results):
+      np.testing.assert_allclose(result.positions,
+                                 mpm.simulate(scene).positions, atol=1e-6,
+                                 rtol=0)
 
   def test_batch_uses_the_largest_substep_count(self):
     soft = _scene("soft")
