@@ -223,6 +223,10 @@ WINDOW_STEPS = 8
 # A window that would cover this fraction of the grid's nodes or more: the
 # whole grid instead (one program fewer, nothing to save).
 WINDOW_MAX_FRACTION = 0.6
+# Grids with fewer nodes run whole: there the window's own work costs more
+# than the nodes it skips (this CPU, docs/performance.md: 1.09-1.3x slower
+# at 5-22 thousand nodes, 0.67-0.88x at 76-83 thousand).
+WINDOW_MIN_NODES = 40_000
 
 
 def window_size(spec: transfer.GridSpec, extent: np.ndarray,
@@ -230,7 +234,10 @@ def window_size(spec: transfer.GridSpec, extent: np.ndarray,
   """The grid window (nodes per axis) for sand of ``extent`` [2] (m) that
   may grow by ``reach`` [2] (m) on each side within one frame and spread
   over a chunk: the extent plus the reach plus the stencil, rounded up to
-  the ladder; None when the whole grid is about as cheap."""
+  the ladder; None when the whole grid is about as cheap (a grid of fewer
+  than ``WINDOW_MIN_NODES`` nodes, or a window of most of it)."""
+  if spec.n_nodes < WINDOW_MIN_NODES:
+    return None
   need = np.ceil((np.asarray(extent) + 2 * np.asarray(reach)) / spec.dx) + 6
   size = []
   for n, full in zip(need, spec.shape):
@@ -249,6 +256,21 @@ def _larger(spec: transfer.GridSpec,
   if grown[0] * grown[1] >= WINDOW_MAX_FRACTION * spec.n_nodes:
     return None
   return grown
+
+
+def _chunk_window(spec: transfer.GridSpec, extent: np.ndarray,
+                  reach: np.ndarray, before: tuple[int, int] | None, *,
+                  first_chunk: bool) -> tuple[int, int] | None:
+  """A chunk's window: ``window_size``'s, never smaller than the last
+  chunk's (``before``), and the whole grid (None) once a chunk ran whole:
+  a deposit rarely shrinks much, and each new size is one more program to
+  compile."""
+  if before is None and not first_chunk:
+    return None
+  wanted = window_size(spec, extent, reach)
+  if wanted is None or before is None:
+    return wanted
+  return tuple(map(max, wanted, before))
 
 
 def _extent(state: solver.MPMState) -> np.ndarray:
@@ -382,12 +404,14 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       (``SimulationResult.rest_frame``), so a deposit's last frames cost
       nothing. None steps every frame.
     rest_frames: the window (frames) of that average.
-    grid_window: the grid work follows the sand: each frame updates only a
-      window of the grid around it (``solver.rollout_windowed``), its size
-      chosen per chunk from the sand's extent and reach (``window_size``);
-      a chunk in which a particle's stencil leaves the window runs again on
-      a larger one. The positions are the whole grid's, bit for bit. False:
-      every substep updates the whole grid.
+    grid_window: on a large grid, the grid work follows the sand: each
+      frame updates only a window of the grid around it
+      (``solver.rollout_windowed``), its size chosen per chunk from the
+      sand's extent and reach (``window_size``; small grids run whole); a
+      chunk in which a particle's stencil leaves the window runs again on a
+      larger one. The positions are the whole grid's within float32
+      rounding (bit for bit where XLA compiles the same arithmetic).
+      False: every substep updates the whole grid.
 
   Returns:
     Per setup, its result; ``n_substeps`` is the largest count used.
@@ -446,12 +470,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     if grid_window:
       reach = max(s.max_speed for s in setups) * SUBSTEP_LADDER[level] * (
           first.scene.frame_dt) + growth
-      wanted = window_size(first.spec, extent, reach)
-      # Never smaller than the last chunk's: a deposit rarely shrinks much,
-      # and each new size is one more program to compile.
-      size = None if (wanted is None or (chunk and size_before is None)) else (
-          wanted if size_before is None else
-          tuple(map(max, wanted, size_before)))
+      size = _chunk_window(first.spec, extent, reach, size_before,
+                           first_chunk=chunk == 0)
     while True:
       compiled, rung_params, bounds = rung(level, size)
       start = time.perf_counter()

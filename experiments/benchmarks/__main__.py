@@ -7,7 +7,7 @@
       --read_data=data/small
   python -m experiments.benchmarks --what=design --out=docs/benchmarks
   python -m experiments.benchmarks --what=batch --out=docs/benchmarks
-  python -m experiments.benchmarks --what=window --out=docs/benchmarks
+  python -m experiments.benchmarks --what=cost --out=docs/benchmarks
   python -m experiments.benchmarks --what=gpu --out=DIR \\
       [--gpu_parts=mpm,gns,train] [--cpu_reference=FILE]
   python -m experiments.benchmarks --what=mpm,gns --quick ...   # smoke test
@@ -45,10 +45,10 @@ from experiments.benchmarks import gns_inputs
 from experiments.benchmarks import gpu_benchmark
 from experiments.benchmarks import input_benchmark
 from experiments.benchmarks import mpm_benchmark
-from experiments.benchmarks import window_benchmark
+from experiments.benchmarks import cost_benchmark
 
 FLAGS = flags.FLAGS
-BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch", "window",
+BENCHMARKS = ("mpm", "gns", "dataset", "design", "input", "batch", "cost",
               "gpu")
 GPU_PARTS = gpu_benchmark.PARTS + ("report",)
 
@@ -189,7 +189,7 @@ def main(argv):
           _READ_DATA.value, out, quick=quick),
       "batch": lambda: batch_benchmark.run_benchmark(
           out, quick=quick, log=logging.info),
-      "window": lambda: window_benchmark.run_benchmark(
+      "cost": lambda: cost_benchmark.run_benchmark(
           out, quick=quick, log=logging.info),
       "gpu": lambda: (
           gpu_benchmark.report_all(out, quick=quick,

@@ -1,13 +1,19 @@
-"""The MPM's grid work follows the sand: cost against the domain's size.
+"""What the MPM pays for: the domain, and the largest scene of a batch.
 
 ``mpm.simulate`` updates only a window of the grid around the sand
-(``grid_window=True``, the default; ``mpm.solver.rollout_windowed``). This
-times the same sand in domains of growing area with the window and with the
-whole grid, and a paper scene both ways, on this machine's first device, by
-``timing``'s rules (compilation apart: each configuration is run once to
-compile, then ``repeats`` times; ``SimulationResult.wall_time_s``, which
-waits for the device; medians). Every windowed run is checked to equal the
-whole grid's positions. docs/performance.md holds the figures.
+(``grid_window=True``, the default; ``mpm.solver.rollout_windowed``), and
+``mpm.simulate_batch`` runs scenes of similar size together
+(``size_buckets``). This times, on this machine's first device:
+
+1. the same sand in domains of growing area, with the window and with the
+   whole grid, and a paper scene both ways (every windowed run checked
+   against the whole grid's positions);
+2. the speed/accuracy study's scenes one at a time, as one padded batch and
+   in size buckets (per trajectory).
+
+``timing``'s rules: compilation apart (each configuration is run once to
+compile, then ``repeats`` times), ``SimulationResult.wall_time_s``, which
+waits for the device, medians. docs/performance.md holds the figures.
 """
 
 import dataclasses
@@ -18,6 +24,8 @@ import numpy as np
 
 import mpm
 from experiments import timing
+from mpm import dataset
+from mpm import resolution
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,23 +37,33 @@ class Sizes:
     column_frames: frames of the column runs.
     paper_frames: frames of the paper-scene runs (600 in the paper).
     paper_particles: particles of the paper scene.
+    paper_fine_spacing: the paper scene again at this particle spacing (m;
+      the tradeoff study's reference), a grid large enough to window.
     repeats: timed runs per configuration (median reported).
     seed: the paper scene's seed.
+    batch_scenes: scenes of the study's test plan in the batch rows.
+    batch_spacing: their particle spacing (m).
   """
   scales: tuple[float, ...] = (1.0, 2.0, 4.0)
   column_frames: int = 300
   paper_frames: int = 600
   paper_particles: int = 1000
+  paper_fine_spacing: float = 0.0025
   repeats: int = 3
   seed: int = 3
+  batch_scenes: int = 14
+  batch_spacing: float = 0.005
 
 
 FULL = Sizes()
 QUICK = Sizes(scales=(1.0, 2.0), column_frames=21, paper_frames=11,
-              paper_particles=200, repeats=1)
+              paper_particles=200, paper_fine_spacing=0.01, repeats=1,
+              batch_scenes=3,
+              batch_spacing=0.02)
 
 # The column: 0.19 x 0.2 m of sand (about 380 particles at 1 cm) on a flat
-# floor at the left of a 0.9 x 0.5 m domain, as in issue 28's measurement.
+# floor at the left of a 0.9 x 0.5 m domain, grid spacing 1 cm, as in
+# issue 28's measurement.
 COLUMN_DOMAIN = (0.9, 0.5)
 
 
@@ -58,6 +76,7 @@ def column_scene(scale: float, num_frames: int) -> mpm.Scene:
       "ramp": {"kind": "polynomial", "coefficients": [0.05]},
       "obstacles": [],
       "granular": {"box": [0.05, 0.05, 0.24, 0.25], "spacing": 0.01},
+      "solver": {"dx": 0.01},
       "num_frames": num_frames})
 
 
@@ -98,19 +117,51 @@ def measure(sizes: Sizes, log: Callable[[str], None]) -> dict[str, Any]:
                                        columns[0]["whole_grid"]["median_s"])
     row["window_over_smallest"] = (row["window"]["median_s"] /
                                    columns[0]["window"]["median_s"])
-  paper = _pair(mpm.sample_scene(sizes.seed,
-                                 num_particles=sizes.paper_particles,
-                                 num_frames=sizes.paper_frames),
-                sizes.repeats)
+  scene = mpm.sample_scene(sizes.seed, num_particles=sizes.paper_particles,
+                           num_frames=sizes.paper_frames)
+  paper = [_pair(scene, sizes.repeats),
+           _pair(resolution.at_spacing(scene, sizes.paper_fine_spacing),
+                 sizes.repeats)]
   log(f"paper scene: {paper}")
+  batches = measure_batches(sizes)
+  log(f"batches: {batches}")
   return {"sizes": dataclasses.asdict(sizes), "columns": columns,
-          "paper_scene": paper}
+          "paper_scene": paper, "batches": batches}
+
+
+def measure_batches(sizes: Sizes) -> dict[str, Any]:
+  """Seconds per trajectory over the study's scenes: one at a time, one
+  padded batch, size buckets (medians of ``repeats`` after a warm-up)."""
+  spec = dataset.DatasetSpec(num_train=1, num_test=sizes.batch_scenes,
+                             num_frames=sizes.paper_frames,
+                             spacing=dataset.PAPER_SPACING)
+  scenes = [resolution.at_spacing(p.scene, sizes.batch_spacing)
+            for p in dataset.plan(spec) if p.split == "test"]
+  per_trajectory = lambda results: sum(
+      r.wall_time_s for r in results) / len(results)
+  rows = {}
+  for name, run in (
+      ("one_at_a_time", lambda: [mpm.simulate(s) for s in scenes]),
+      ("one_batch", lambda: mpm.simulate_batch(scenes, bucket_ratio=None)),
+      ("size_buckets", lambda: mpm.simulate_batch(scenes))):
+    _, rows[name] = timing.self_timed(run, sizes.repeats, per_trajectory)
+  counts = [len(mpm.granular_particles(s)) for s in scenes]
+  return {"scenes": len(scenes), "spacing": sizes.batch_spacing,
+          "particles": counts,
+          "buckets": len(mpm.simulation.size_buckets(counts)),
+          "seconds_per_trajectory": rows,
+          "one_batch_over_one_at_a_time": (
+              rows["one_batch"]["median_s"] /
+              rows["one_at_a_time"]["median_s"]),
+          "buckets_over_one_at_a_time": (
+              rows["size_buckets"]["median_s"] /
+              rows["one_at_a_time"]["median_s"])}
 
 
 def to_markdown(result: dict[str, Any]) -> str:
   env = result["environment"]
   lines = [
-      "# The MPM's grid window: cost against the domain's size",
+      "# What the MPM pays for: the domain and the batch",
       "",
       f"Command: `{result['command']}`",
       "",
@@ -136,18 +187,36 @@ def to_markdown(result: dict[str, Any]) -> str:
         f"{r['window_over_whole']:.2f} | {r['whole_grid_over_smallest']:.2f} |"
         f" {r['window_over_smallest']:.2f} | "
         f"{r['max_position_difference_m']:.1e} |")
-  p = result["paper_scene"]
   lines += [
       "",
-      f"Paper scene ({p['scene']}, {p['particles']} particles, "
-      f"{p['frames']} frames, grid {p['grid'][0]} x {p['grid'][1]}): whole "
-      f"grid {p['whole_grid']['median_s']:.3f} s, window "
-      f"{p['window']['median_s']:.3f} s "
-      f"({p['window_over_whole']:.2f}x); compiling "
-      f"{p['whole_grid_compile_s']:.1f} s against "
-      f"{p['window_compile_s']:.1f} s (the window compiles one "
-      "program per size it uses); positions differ by at most "
-      f"{p['max_position_difference_m']:.1e} m.",
+      "The paper scene at its own spacing and at the study's reference "
+      "spacing (the window runs only on grids of at least "
+      f"{mpm.simulation.WINDOW_MIN_NODES:,} nodes):",
+      "",
+      "| scene | particles | frames | grid nodes | whole grid (s) | window (s)"
+      " | window / whole | compile, whole / window (s) | max position "
+      "difference (m) |",
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+  ]
+  for p in result["paper_scene"]:
+    lines.append(
+        f"| {p['scene']} | {p['particles']} | {p['frames']} | "
+        f"{p['grid'][0]} x {p['grid'][1]} | {p['whole_grid']['median_s']:.3f}"
+        f" | {p['window']['median_s']:.3f} | {p['window_over_whole']:.2f} | "
+        f"{p['whole_grid_compile_s']:.1f} / {p['window_compile_s']:.1f} | "
+        f"{p['max_position_difference_m']:.1e} |")
+  lines.append("")
+  b = result["batches"]
+  t = b["seconds_per_trajectory"]
+  lines += [
+      f"The study's {b['scenes']} test-plan scenes at "
+      f"{b['spacing'] * 1e3:g} mm ({min(b['particles'])}-"
+      f"{max(b['particles'])} particles), seconds per trajectory: one at a "
+      f"time {t['one_at_a_time']['median_s']:.3f}; one batch padded to the "
+      f"largest {t['one_batch']['median_s']:.3f} "
+      f"({b['one_batch_over_one_at_a_time']:.2f}x); {b['buckets']} size "
+      f"buckets {t['size_buckets']['median_s']:.3f} "
+      f"({b['buckets_over_one_at_a_time']:.2f}x).",
       "",
   ]
   return "\n".join(lines)
@@ -155,7 +224,7 @@ def to_markdown(result: dict[str, Any]) -> str:
 
 def run_benchmark(out_dir: str, *, quick: bool = False,
                   log: Callable[[str], None] = print) -> dict[str, Any]:
-  """Measures, writes ``window_benchmark[_quick].json`` and ``.md``."""
+  """Measures, writes ``cost_benchmark[_quick].json`` and ``.md``."""
   sizes = QUICK if quick else FULL
   env = timing.environment(quick)
   results = {"environment": env,
@@ -163,6 +232,6 @@ def run_benchmark(out_dir: str, *, quick: bool = False,
                  sys.argv[1:]),
              **measure(sizes, log)}
   timing.end_environment(env)
-  timing.write_results(out_dir, "window_benchmark", quick, results,
+  timing.write_results(out_dir, "cost_benchmark", quick, results,
                        to_markdown(results))
   return results

@@ -165,7 +165,13 @@ def _wide(name="wide", box=(0.04, 0.06, 0.14, 0.14), **kw):
 
 class GridWindowTest(absltest.TestCase):
   """``grid_window``: the grid work follows the sand, the result does not
-  change."""
+  change. (Small grids run whole by default; these tests window them.)"""
+
+  def setUp(self):
+    super().setUp()
+    patch = mock.patch.object(simulation, "WINDOW_MIN_NODES", 0)
+    patch.start()
+    self.addCleanup(patch.stop)
 
   def _sizes_used(self, scene, **kwargs):
     """(result, the window sizes chosen per chunk)."""
@@ -225,6 +231,9 @@ class GridWindowTest(absltest.TestCase):
                             -(-12 // step[1]) * step[1]))
     self.assertIsNone(simulation.window_size(spec, np.array([0.8, 0.3]),
                                              np.array([0.02, 0.02])))
+    with mock.patch.object(simulation, "WINDOW_MIN_NODES", spec.n_nodes + 1):
+      self.assertIsNone(simulation.window_size(spec, np.array([0.1, 0.08]),
+                                               np.array([0.02, 0.02])))
 
 
 class WindowedSolverTest(absltest.TestCase):
