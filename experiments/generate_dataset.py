@@ -12,7 +12,6 @@ Across processes or hosts sharing a filesystem (docs/scaling.md): run
 once ``--assemble``; the dataset is the one a single run writes.
 """
 
-import os
 import shutil
 import sys
 

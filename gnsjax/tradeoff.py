@@ -18,9 +18,11 @@ front_tolerance=...)``); this module adds the Pareto front.
 import math
 from typing import Sequence
 
-# pylint: disable-next=unused-import
-from mpm.resolution import (METRICS, Choice, cheapest, load,  # noqa: F401
+from mpm.resolution import (METRICS, Choice, cheapest, load,
                             matching_scenes, point_errors)
+
+__all__ = ["METRICS", "Choice", "cheapest", "load", "matching_scenes",
+           "point_errors", "pareto_front"]
 
 
 def pareto_front(costs: Sequence[float], errors: Sequence[float]

@@ -8,7 +8,6 @@ T frames, B scenes in a batch.
 
 import dataclasses
 import math
-import os
 import time
 from typing import Callable, Sequence
 
@@ -23,6 +22,7 @@ from mpm import resolution
 from mpm import scene as scene_lib
 from mpm import solver
 from mpm import transfer
+from mpm import window
 
 GRAVITY = 9.81  # m/s^2
 
@@ -217,70 +217,6 @@ _batched_windowed_rollout = jax.jit(
                                                None)),
     static_argnums=(3, 4, 5, 6))
 
-# Window sizes per axis: multiples of an eighth of the grid (at least 8
-# nodes), so a run compiles for a few sizes at most.
-WINDOW_STEPS = 8
-# A window that would cover this fraction of the grid's nodes or more: the
-# whole grid instead (one program fewer, nothing to save).
-WINDOW_MAX_FRACTION = 0.6
-# Grids with fewer nodes run whole: there the window's own work costs more
-# than the nodes it skips (this CPU, docs/performance.md: 1.09-1.3x slower
-# at 5-22 thousand nodes, 0.67-0.88x at 76-83 thousand).
-WINDOW_MIN_NODES = 40_000
-
-
-def window_size(spec: transfer.GridSpec, extent: np.ndarray,
-                reach: np.ndarray) -> tuple[int, int] | None:
-  """The grid window (nodes per axis) for sand of ``extent`` [2] (m) that
-  may grow by ``reach`` [2] (m) on each side within one frame and spread
-  over a chunk: the extent plus the reach plus the stencil, rounded up to
-  the ladder; None when the whole grid is about as cheap (a grid of fewer
-  than ``WINDOW_MIN_NODES`` nodes, or a window of most of it)."""
-  if spec.n_nodes < WINDOW_MIN_NODES:
-    return None
-  need = np.ceil((np.asarray(extent) + 2 * np.asarray(reach)) / spec.dx) + 6
-  size = []
-  for n, full in zip(need, spec.shape):
-    step = max(8, -(-full // WINDOW_STEPS))
-    size.append(int(min(full, -(-int(n) // step) * step)))
-  if size[0] * size[1] >= WINDOW_MAX_FRACTION * spec.n_nodes:
-    return None
-  return tuple(size)
-
-
-def _larger(spec: transfer.GridSpec,
-            size: tuple[int, int]) -> tuple[int, int] | None:
-  """The window two ladder steps larger on each axis (None: the grid)."""
-  grown = tuple(min(full, n + 2 * max(8, -(-full // WINDOW_STEPS)))
-                for n, full in zip(size, spec.shape))
-  if grown[0] * grown[1] >= WINDOW_MAX_FRACTION * spec.n_nodes:
-    return None
-  return grown
-
-
-def _chunk_window(spec: transfer.GridSpec, extent: np.ndarray,
-                  reach: np.ndarray, before: tuple[int, int] | None, *,
-                  first_chunk: bool) -> tuple[int, int] | None:
-  """A chunk's window: ``window_size``'s, never smaller than the last
-  chunk's (``before``), and the whole grid (None) once a chunk ran whole:
-  a deposit rarely shrinks much, and each new size is one more program to
-  compile."""
-  if before is None and not first_chunk:
-    return None
-  wanted = window_size(spec, extent, reach)
-  if wanted is None or before is None:
-    return wanted
-  return tuple(map(max, wanted, before))
-
-
-def _extent(state: solver.MPMState) -> np.ndarray:
-  """[..., 2] the sand's bounding-box size (m), per scene."""
-  x, active = np.asarray(state.x), np.asarray(state.volume) > 0
-  lo = np.where(active[..., None], x, np.inf).min(-2)
-  hi = np.where(active[..., None], x, -np.inf).max(-2)
-  return hi - lo
-
-
 # Compiled chunk programs by (function, static args, argument shapes).
 _compiled: dict = {}
 
@@ -407,7 +343,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     grid_window: on a large grid, the grid work follows the sand: each
       frame updates only a window of the grid around it
       (``solver.rollout_windowed``), its size chosen per chunk from the
-      sand's extent and reach (``window_size``; small grids run whole); a
+      sand's extent and reach (``mpm.window``; small grids run whole); a
       chunk in which a particle's stencil leaves the window runs again on a
       larger one. The positions are the whole grid's within float32
       rounding (bit for bit where XLA compiles the same arithmetic).
@@ -462,7 +398,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   wall_time = 0.0
   rest_frame = None
   axis = 1 if batched else 0   # the frame axis of the positions
-  extent = _extent(state).reshape(-1, 2).max(0)
+  extent = window.extent(state).reshape(-1, 2).max(0)
   growth = np.zeros(2)         # how much the sand spread in the last chunk
   size_before = None
   for chunk in range(n_chunks):
@@ -470,8 +406,8 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     if grid_window:
       reach = max(s.max_speed for s in setups) * SUBSTEP_LADDER[level] * (
           first.scene.frame_dt) + growth
-      size = _chunk_window(first.spec, extent, reach, size_before,
-                           first_chunk=chunk == 0)
+      size = window.chunk_window(first.spec, extent, reach, size_before,
+                                 first_chunk=chunk == 0)
     while True:
       compiled, rung_params, bounds = rung(level, size)
       start = time.perf_counter()
@@ -483,7 +419,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       # dropped unchecked.
       keep = min(frames, first.scene.num_frames - 1 - chunk * frames)
       if size is not None and np.asarray(out[4])[..., :keep].any():
-        size = _larger(first.spec, size)  # the chunk again, on more grid
+        size = window.larger(first.spec, size)  # the chunk again, larger
         continue
       try:
         for b, s in enumerate(setups):
@@ -496,7 +432,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
           raise
         level += 1   # the chunk again, from its start, with more substeps
     state, size_before = new_state, size
-    grown = _extent(state).reshape(-1, 2).max(0)
+    grown = window.extent(state).reshape(-1, 2).max(0)
     growth, extent = np.maximum(grown - extent, 0.0), grown
     positions.append(x)
     speeds.append(vmax)
@@ -624,103 +560,3 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
     for i, result in zip(group, simulate_setups(members, **kwargs)):
       results[i] = result
   return results
-
-
-# ------------------------------------------------------- batch sizing ---
-
-
-@dataclasses.dataclass(frozen=True)
-class BatchSizing:
-  """How many scenes like one ``simulate_batch`` call should take.
-
-  Attributes:
-    batch: scenes per call (>= 1).
-    per_scene_bytes: device memory each scene adds to the batched program
-      (XLA's memory analysis at 1 and 2 scenes: arguments, outputs and
-      temporaries).
-    fixed_bytes: what the program needs whatever the batch.
-    available_bytes: the device memory counted on (None: not known).
-    source: where ``available_bytes`` came from, or the fallback taken.
-  """
-  batch: int
-  per_scene_bytes: int
-  fixed_bytes: int
-  available_bytes: int | None
-  source: str
-
-
-def device_memory_bytes(device=None) -> int | None:
-  """Bytes a new program may use on ``device`` (default: the first):
-  ``memory_stats()``'s ``bytes_limit`` less ``bytes_in_use``; None where
-  the device keeps no such statistics (the CPU)."""
-  device = device or jax.devices()[0]
-  try:
-    stats = device.memory_stats()
-  except (AttributeError, NotImplementedError, RuntimeError):
-    stats = None
-  if not stats or "bytes_limit" not in stats:
-    return None
-  return int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
-
-
-def program_bytes(setups: Sequence[Setup], chunk_frames: int = 50) -> int:
-  """Device bytes of the batched chunk program ``simulate_setups`` runs
-  for these setups (compiled, not run; XLA's memory analysis)."""
-  state, params, field = _stacked(setups, batched=True)
-  first = setups[0]
-  _, frames = chunking(first.scene.num_frames, chunk_frames)
-  compiled, _ = _compile(_batched_rollout, state, params, field, first.spec,
-                         frames, first.n_substeps)
-  m = compiled.memory_analysis()
-  if m is None:
-    raise NotImplementedError("no memory analysis on this backend")
-  return int(m.argument_size_in_bytes + m.output_size_in_bytes +
-             m.temp_size_in_bytes - m.alias_size_in_bytes)
-
-
-def batch_size_for(scene: scene_lib.Scene, *, chunk_frames: int = 50,
-                   device=None, fraction: float = 0.8, cpu_batch: int = 8,
-                   max_batch: int = 4096) -> BatchSizing:
-  """Scenes like ``scene`` per ``simulate_batch`` call that fill a device.
-
-  The per-scene footprint is measured from the compiled batched program at
-  1 and 2 scenes (two compilations, seconds). On an accelerator the batch
-  is ``fraction`` of the free memory (``device_memory_bytes``) over it.
-  Where the device reports no memory (the CPU) the batch is ``cpu_batch``
-  (a batch does not fill the CPU's memory but its cores, and more scenes
-  per call gain little there: docs/scaling.md), still capped by the
-  host's free memory.
-
-  Args:
-    scene: a representative scene (the largest of those to batch).
-    chunk_frames: as ``simulate_setups``'s.
-    device: default the first device.
-    fraction: share of the free memory to fill (the rest: XLA's slack).
-    cpu_batch: the batch where memory statistics are missing.
-    max_batch: upper bound in any case.
-
-  Returns:
-    A :class:`BatchSizing`.
-  """
-  if not 0 < fraction <= 1:
-    raise scene_lib.InputError(f"fraction = {fraction}; allowed: (0, 1]")
-  s = setup(scene)
-  one, two = program_bytes([s], chunk_frames), program_bytes([s, s],
-                                                             chunk_frames)
-  per_scene = max(two - one, 1)
-  fixed = max(one - per_scene, 0)
-  available = device_memory_bytes(device)
-  source = "memory_stats: bytes_limit - bytes_in_use"
-  if available is None:
-    batch = cpu_batch
-    source = (f"fallback: {(device or jax.devices()[0]).platform} reports "
-              f"no memory_stats; cpu_batch = {cpu_batch}")
-    try:  # host memory still bounds it
-      host = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-      batch = min(batch, max(1, int((fraction * host - fixed) // per_scene)))
-    except (ValueError, OSError, AttributeError):
-      pass
-  else:
-    batch = int((fraction * available - fixed) // per_scene)
-  return BatchSizing(max(1, min(batch, max_batch)), per_scene, fixed,
-                     available, source)

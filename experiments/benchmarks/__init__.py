@@ -27,7 +27,7 @@ and padded batches read per second from ``--read_data``.
 
 batch (``batch_benchmark``): particle-substeps per second of
 ``mpm.simulate_batch`` against scenes per batch, and the batch
-``mpm.simulation.batch_size_for`` picks on this device.
+``mpm.batch_sizing.batch_size_for`` picks on this device.
 
 design (``design_benchmark``): the gradient of an objective w.r.t. an
 obstacle's x against the forward rollout, for MPM and GNS: time ratio and

@@ -3,7 +3,7 @@
 ``mpm.simulate_batch`` runs B scenes as one vmapped program. This times it
 for growing B on this machine's first device (the rules of ``timing``:
 compilation apart, a warm-up run, the library's own clock, which waits for
-the device, medians of repeats) and records what ``mpm.simulation.
+the device, medians of repeats) and records what ``mpm.batch_sizing.
 batch_size_for`` chooses here: from ``memory_stats()`` on an accelerator,
 its fallback on the CPU. docs/scaling.md holds the figures.
 """
@@ -17,7 +17,7 @@ import jax.numpy as jnp
 
 import mpm
 from experiments import timing
-from mpm import simulation
+from mpm import batch_sizing
 
 # The H100 target of issue #15 (not measurable without a GPU).
 TARGET_PARTICLE_SUBSTEPS_PER_S = 1e8
@@ -128,7 +128,7 @@ def run_benchmark(out_dir: str, *, quick: bool = False,
   env = timing.environment(quick)
   scene = mpm.sample_scene(sizes.seed, num_particles=sizes.particles,
                            num_frames=sizes.frames + 1)
-  sizing = simulation.batch_size_for(scene, chunk_frames=sizes.frames)
+  sizing = batch_sizing.batch_size_for(scene, chunk_frames=sizes.frames)
   log(f"batch_size_for: {sizing}")
   results = {"environment": env,
              "command": "python -m experiments.benchmarks " + " ".join(

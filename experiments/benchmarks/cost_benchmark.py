@@ -26,6 +26,7 @@ import mpm
 from experiments import timing
 from mpm import dataset
 from mpm import resolution
+from mpm import window
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,7 +192,7 @@ def to_markdown(result: dict[str, Any]) -> str:
       "",
       "The paper scene at its own spacing and at the study's reference "
       "spacing (the window runs only on grids of at least "
-      f"{mpm.simulation.WINDOW_MIN_NODES:,} nodes):",
+      f"{window.WINDOW_MIN_NODES:,} nodes):",
       "",
       "| scene | particles | frames | grid nodes | whole grid (s) | window (s)"
       " | window / whole | compile, whole / window (s) | max position "

@@ -19,7 +19,7 @@ mpm: the paper scene (1000 particles, one semicircle, 600 frames) one at a
   time (``mpm.simulate``'s clock) and B copies of it vmapped
   (``jax.vmap(mpm.solver.rollout)``, chunks of 50 frames copied to the host
   as ``mpm.simulate_setups`` does), seconds per trajectory and
-  particle-substeps per second; the batch ``mpm.simulation.batch_size_for``
+  particle-substeps per second; the batch ``mpm.batch_sizing.batch_size_for``
   picks from the device's memory statistics, run for one chunk; a batch of
   the paper dataset's own scenes (``mpm.dataset.plan``, 700-1500
   particles) timed and extrapolated to its 1,100 trajectories; the study of
@@ -114,6 +114,7 @@ from gnsjax import train
 import mpm
 from mpm import dataset as mpm_dataset
 from mpm import io as mpm_io
+from mpm import batch_sizing
 from mpm import simulation
 
 PARTS = ("mpm", "gns", "train")
@@ -395,7 +396,7 @@ def measure_largest_batch(scene: mpm.Scene, setup: mpm.Setup, sizes: Sizes,
   fallback on the CPU), capped at ``sizes.max_batch``, run for one chunk;
   halved on running out of memory."""
   chunk = min(sizes.chunk_frames, sizes.frames - 1) + 1
-  sizing = simulation.batch_size_for(scene, chunk_frames=chunk - 1)
+  sizing = batch_sizing.batch_size_for(scene, chunk_frames=chunk - 1)
   out = {"sizing": dataclasses.asdict(sizing), "cap": sizes.max_batch,
          "frames": chunk, "failed": []}
   b = min(sizing.batch, sizes.max_batch)

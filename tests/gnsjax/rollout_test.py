@@ -3,7 +3,6 @@
 import dataclasses
 import functools
 import time
-import unittest
 
 from absl.testing import absltest
 import jax

@@ -3,7 +3,6 @@ its features against brute-force distances, and the solid constraint
 (`gnsjax.simulator.constrain`)."""
 
 import functools
-import unittest
 
 from absl.testing import absltest
 import jax

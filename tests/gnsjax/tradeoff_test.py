@@ -1,7 +1,6 @@
 """Tests for `gnsjax.tradeoff`: the Pareto front against brute force, and
 the cheapest configuration on hand-made tables."""
 
-import itertools
 import json
 import math
 import os

@@ -10,8 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import mpm
-from mpm import simulation
 from mpm import solver
+from mpm import window
 
 FLOOR = 0.05
 
@@ -169,19 +169,19 @@ class GridWindowTest(absltest.TestCase):
 
   def setUp(self):
     super().setUp()
-    patch = mock.patch.object(simulation, "WINDOW_MIN_NODES", 0)
+    patch = mock.patch.object(window, "WINDOW_MIN_NODES", 0)
     patch.start()
     self.addCleanup(patch.stop)
 
   def _sizes_used(self, scene, **kwargs):
     """(result, the window sizes chosen per chunk)."""
     chosen = []
-    original = simulation.window_size
+    original = window.window_size
 
     def spy(*args):
       chosen.append(original(*args))
       return chosen[-1]
-    with mock.patch.object(simulation, "window_size", spy):
+    with mock.patch.object(window, "window_size", spy):
       return mpm.simulate(scene, chunk_frames=10, **kwargs), chosen
 
   def test_the_window_gives_the_whole_grids_positions_bit_for_bit(self):
@@ -205,7 +205,7 @@ class GridWindowTest(absltest.TestCase):
 
   def test_a_window_the_sand_leaves_is_grown_and_the_chunk_run_again(self):
     scene = _wide()
-    with mock.patch.object(simulation, "window_size",
+    with mock.patch.object(window, "window_size",
                            lambda spec, extent, reach: (8, 8)):
       grown = mpm.simulate(scene, chunk_frames=10)
     whole = mpm.simulate(scene, chunk_frames=10, grid_window=False)
@@ -222,17 +222,17 @@ class GridWindowTest(absltest.TestCase):
 
   def test_window_sizes_come_from_a_ladder_and_large_ones_are_the_grid(self):
     spec = mpm.setup(_wide()).spec                  # 52 x 30 nodes
-    step = [max(8, -(-n // simulation.WINDOW_STEPS)) for n in spec.shape]
-    size = simulation.window_size(spec, np.array([0.1, 0.08]),
+    step = [max(8, -(-n // window.WINDOW_STEPS)) for n in spec.shape]
+    size = window.window_size(spec, np.array([0.1, 0.08]),
                                   np.array([0.02, 0.02]))
     # (0.1 + 0.04) / 0.02 + 6 = 13 nodes and (0.08 + 0.04) / 0.02 + 6 = 12,
     # rounded up to the steps.
     self.assertEqual(size, (-(-13 // step[0]) * step[0],
                             -(-12 // step[1]) * step[1]))
-    self.assertIsNone(simulation.window_size(spec, np.array([0.8, 0.3]),
+    self.assertIsNone(window.window_size(spec, np.array([0.8, 0.3]),
                                              np.array([0.02, 0.02])))
-    with mock.patch.object(simulation, "WINDOW_MIN_NODES", spec.n_nodes + 1):
-      self.assertIsNone(simulation.window_size(spec, np.array([0.1, 0.08]),
+    with mock.patch.object(window, "WINDOW_MIN_NODES", spec.n_nodes + 1):
+      self.assertIsNone(window.window_size(spec, np.array([0.1, 0.08]),
                                                np.array([0.02, 0.02])))
 
 

@@ -5,7 +5,6 @@ import time
 
 from absl.testing import absltest
 from absl.testing import parameterized
-import jax.numpy as jnp
 import numpy as np
 
 from gnsjax.design import baselines
