@@ -37,6 +37,7 @@ from gnsjax import graph
 from gnsjax import simulator
 from mpm import geometry
 from mpm import io as mpm_io
+from mpm import simulation
 
 # Type id of the padding nodes of a batched rollout (any valid id: they do not
 # move and have no edge but their own, so it never reaches a real node).
@@ -329,6 +330,32 @@ def rollout_batch(predictor, params, scenes: Sequence[SceneNodes],
   return [Rollout(np.ascontiguousarray(positions[:, b, :size]),
                   pushed[:, b], depth[:, b])
           for b, size in enumerate(sizes)]
+
+
+def rollout_buckets(predictor, params, scenes: Sequence[SceneNodes],
+                    n_steps: int, context: simulator.Context,
+                    spec: graph.GraphSpec,
+                    bucket_ratio: float = simulation.BUCKET_RATIO,
+                    **kwargs) -> list[Rollout]:
+  """``rollout_batch`` over groups of scenes of similar size.
+
+  Scenes whose node counts are within ``bucket_ratio`` of each other share
+  one batched program (``mpm.simulation.size_buckets``, as the MPM's
+  ``simulate_batch``), so a small scene is not padded to the largest;
+  other keyword arguments are ``rollout_batch``'s.
+
+  Returns:
+    B ``Rollout``s in the order of ``scenes``.
+  """
+  groups = simulation.size_buckets([len(sc.types) for sc in scenes],
+                                   bucket_ratio)
+  out: list[Rollout | None] = [None] * len(scenes)
+  for group in groups:
+    results = rollout_batch(predictor, params, [scenes[i] for i in group],
+                            n_steps, context, spec, **kwargs)
+    for i, result in zip(group, results):
+      out[i] = result
+  return out
 
 
 def input_frame_indices(input_frames: int, frame_stride: int) -> np.ndarray:

@@ -199,8 +199,9 @@ def training_seconds(workdir: str) -> float | None:
 def gns_batched_seconds(run: run_lib.Run,
                         trajectories: Sequence[mpm_io.Trajectory],
                         repeats: int) -> tuple[float, float]:
-  """Seconds per trajectory when every scene rolls out as one vmapped
-  program (``rollout.rollout_batch``), and that program's compile seconds.
+  """Seconds per trajectory when the scenes roll out as vmapped programs
+  over scenes of similar size (``rollout.rollout_buckets``), and those
+  programs' compile seconds.
 
   The median of ``repeats`` synchronised batches after a warm-up batch
   (whose extra time is the compile), divided by the number of scenes.
@@ -213,9 +214,9 @@ def gns_batched_seconds(run: run_lib.Run,
   n_steps = len(rollout_lib.predicted_frame_indices(
       len(trajectories[0].positions), c, k))
   predictor = simulator.ModelPredictor(run.model)
-  batch = lambda: rollout_lib.rollout_batch(predictor, run.params, scenes,
-                                            n_steps, problem.context,
-                                            problem.spec)
+  batch = lambda: rollout_lib.rollout_buckets(predictor, run.params, scenes,
+                                              n_steps, problem.context,
+                                              problem.spec)
   timed = timing.time_calls({"batch": batch}, repeats)["batch"]
   return (timed["median_s"] / len(scenes),
           max(timed["warmup_s"] - timed["median_s"], 0.0))

@@ -356,6 +356,21 @@ class RolloutBatchTest(absltest.TestCase):
       self.assertGreater(np.max(np.abs(pred.positions[-1, m] - w[-1, m])),
                          1e-6)
 
+  def test_buckets_group_by_size_and_keep_the_order(self):
+    sizes = [len(sc.types) for sc in self.scenes]
+    # A ratio that separates the smallest scene from the other two.
+    ratio = (sorted(sizes)[1] / sorted(sizes)[0] + 1) / 2
+    self.assertGreaterEqual(
+        len(mpm.simulation.size_buckets(sizes, ratio)), 2)
+    buckets = rollout.rollout_buckets(
+        self.predictor, self.params, self.scenes, self.STEPS,
+        self.problem.context, self.problem.spec, bucket_ratio=ratio, chunk=4)
+    self.assertLen(buckets, 3)
+    for pred, bucket in zip(self.batched, buckets):
+      self.assertEqual(bucket.positions.shape, pred.positions.shape)
+      np.testing.assert_allclose(bucket.positions, pred.positions, rtol=0,
+                                 atol=1e-5)
+
   def test_reallocation_equals_ample_capacity(self):
     # No headroom: reallocated lists overflow again as soon as any scene gains
     # an edge, mid-chunk; the first list (self-edges only) at step 0.
