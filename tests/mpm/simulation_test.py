@@ -236,6 +236,19 @@ class GridWindowTest(absltest.TestCase):
                                                np.array([0.02, 0.02])))
 
 
+  def test_a_chunks_window_never_shrinks_and_whole_stays_whole(self):
+    spec = mpm.setup(_wide()).spec
+    small, reach = np.array([0.1, 0.08]), np.array([0.02, 0.02])
+    first = window.chunk_window(spec, small, reach, None, first_chunk=True)
+    self.assertIsNotNone(first)
+    bigger = (first[0] + 8, first[1])
+    self.assertEqual(window.chunk_window(spec, small, reach, bigger,
+                                         first_chunk=False), bigger)
+    # Once a chunk ran on the whole grid, later chunks do too.
+    self.assertIsNone(window.chunk_window(spec, small, reach, None,
+                                          first_chunk=False))
+
+
 class WindowedSolverTest(absltest.TestCase):
   """``solver.rollout_windowed`` against ``solver.rollout``."""
 
