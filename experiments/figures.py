@@ -34,6 +34,7 @@ import numpy as np
 
 import mpm
 from mpm import geometry
+from mpm import incline
 
 _SAND = "#1f77b4"
 _RAMP = "#cccccc"
@@ -420,3 +421,90 @@ def pareto(summary: Sequence[dict], path: str, batched: bool = False):
   ax.set_ylabel("front error (fraction of the runout)")
   ax.legend(fontsize=7)
   _save(fig, path)
+
+
+def column_validation(rows: Sequence[dict], deposits: dict, path: str,
+                      slope: float, band: float, exponent: float,
+                      height_exponent: float) -> str:
+  """Column collapses against the laboratory (``experiments.validation``):
+  the runout against aspect ratio per rheology, with the linear law
+  (``slope`` a +- ``band``, a <= 1) and a^``exponent`` through the measured
+  a = 2 point; h0 / h likewise with a^``height_exponent``; and the final
+  deposits' surfaces (the highest particle per bin), in units of the
+  column's width L0, a colour per aspect ratio, a line style per rheology."""
+  rheologies = list(dict.fromkeys(r["rheology"] for r in rows))
+  fig, axes = plt.subplots(1, 3, figsize=(15.0, 4.2))
+  a = np.geomspace(0.3, 1.0, 20)
+  axes[0].fill_between(a, slope * a * (1 - band), slope * a * (1 + band),
+                       color="#dddddd", label=f"{slope:g} a +- {band:.0%}")
+  for ax, key, power in ((axes[0], "runout", exponent),
+                         (axes[1], "h0_over_h", height_exponent)):
+    for k, rheology in enumerate(rheologies):
+      mine = [r for r in rows if r["rheology"] == rheology]
+      aspects = np.array([r["aspect_ratio"] for r in mine])
+      values = np.array([r[key] for r in mine])
+      ax.plot(aspects, values, "o-", color=f"C{k}", label=rheology)
+      tall = aspects >= 2
+      if tall.any():
+        a0, v0 = aspects[tall][0], values[tall][0]
+        at = np.geomspace(a0, aspects.max(), 20)
+        ax.plot(at, v0 * (at / a0)**power, ":", color=f"C{k}",
+                label=f"a^{power:.2g} through a = {a0:g}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("aspect ratio a = h0 / L0")
+    ax.legend(fontsize=7)
+  axes[0].set_ylabel("runout (L - L0) / L0")
+  axes[1].set_ylabel("h0 / h (initial over final height)")
+  ax = axes[2]
+  styles = ("-", "--", ":", "-.")
+  aspects = sorted({r["aspect_ratio"] for r in rows})
+  colours = plt.get_cmap("viridis")
+  for j, rheology in enumerate(rheologies):
+    for aspect, scene, x in deposits.get(rheology, []):
+      width0, floor = scene.granular.box[2], scene.granular.box[1]
+      step = 2 * scene.granular.spacing
+      bins = np.floor(x[:, 0] / step).astype(int)
+      top = np.full(bins.max() + 1, np.nan)
+      np.fmax.at(top, bins, x[:, 1] - floor)
+      k = aspects.index(aspect)
+      ax.plot((np.arange(len(top)) + 0.5) * step / width0, top / width0,
+              styles[j % len(styles)],
+              color=colours(k / max(len(aspects) - 1, 1)),
+              label=f"a = {aspect:g}, {rheology}")
+  ax.set_xlabel("x / L0")
+  ax.set_ylabel("deposit surface / L0")
+  ax.set_title("final deposits", fontsize=9)
+  ax.legend(fontsize=6, ncol=2)
+  _save(fig, path)
+  return path
+
+
+def incline_profiles(profiles: dict, path: str) -> str:
+  """Steady flow down the incline (``experiments.validation``): for each
+  (rheology, angle), the final velocity profile u(z) against the Bagnold
+  profile (mu(I) only), and the surface speed over time."""
+  fig, (ax_u, ax_t) = plt.subplots(1, 2, figsize=(10.0, 4.0))
+  for k, ((rheology, angle), (z, u, strip, times, speeds)) in enumerate(
+      profiles.items()):
+    colour = f"C{k}"
+    label = f"{rheology}, {angle:g} deg"
+    ax_u.scatter(u, z * 1e3, s=1, color=colour, alpha=0.4)
+    m = strip.setup.scene.material
+    if rheology == "mu_i":
+      zz = np.linspace(0, strip.depth, 100)
+      ax_u.plot(incline.bagnold_velocity(zz, strip.depth, strip.theta, m),
+                zz * 1e3, "-", color=colour, label=f"Bagnold, {angle:g} deg")
+    ax_t.plot(times, speeds, "-", color=colour, label=label)
+  ax_u.set_xlabel("downslope velocity u (m/s)")
+  ax_u.set_ylabel("height above the base z (mm)")
+  ax_u.set_title("profile at the end (dots: MPM particles)", fontsize=9)
+  ax_u.legend(fontsize=7)
+  ax_t.set_xlabel("time (s)")
+  ax_t.set_ylabel("surface speed (m/s)")
+  ax_t.set_yscale("log")
+  ax_t.legend(fontsize=7)
+  _save(fig, path)
+  return path

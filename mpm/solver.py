@@ -117,7 +117,11 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   v = v * active[:, None]
   C = C * active[:, None, None]
   x = boundary.project_particles(field, st, state.x + dt * v, state.x, spec.dx)
-  x = jnp.clip(x, 0.0, params.domain[None, :])
+  if spec.periodic_x:
+    x = jnp.stack([jnp.mod(x[:, 0], params.domain[0]),
+                   jnp.clip(x[:, 1], 0.0, params.domain[1])], -1)
+  else:
+    x = jnp.clip(x, 0.0, params.domain[None, :])
   F = state.F + dt * jnp.sum(C[..., :, :, None] * state.F[..., None, :, :], -2)
   if params.mu_i is None:
     F, vc = constitutive.project(F, state.volume_correction, mu, lam, alpha)

@@ -26,10 +26,13 @@ class GridSpec:
     dx: node spacing [m].
     shape: (nx, ny) nodes along x and y.
     origin: world position [m] of node (0, 0).
+    periodic_x: the grid wraps along x: node nx is node 0 (a strip of
+      width nx * dx with no side walls, ``mpm.incline``); origin[0] is then 0.
   """
   dx: float
   shape: tuple[int, int]
   origin: tuple[float, float]
+  periodic_x: bool = False
 
   @property
   def n_nodes(self) -> int:
@@ -96,8 +99,11 @@ def stencil(x: jax.Array, spec: GridSpec,
   if window_at is not None:
     b = b - window_at[None, :]
   oi = jnp.arange(3, dtype=jnp.int32)
-  index = ((b[:, :1, None] + oi[None, :, None]) * spec.shape[1] +
-           b[:, 1:, None] + oi[None, None, :]).reshape(-1, 9)
+  column = b[:, :1, None] + oi[None, :, None]
+  if spec.periodic_x:
+    column = column % spec.shape[0]
+  index = (column * spec.shape[1] + b[:, 1:, None] +
+           oi[None, None, :]).reshape(-1, 9)
   return Stencil(index, weight, offset)
 
 
