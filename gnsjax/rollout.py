@@ -332,29 +332,50 @@ def rollout_batch(predictor, params, scenes: Sequence[SceneNodes],
           for b, size in enumerate(sizes)]
 
 
+def default_max_batch() -> int | None:
+  """Scenes per batched program when the caller does not say: one on the
+  CPU, no limit elsewhere. On the CPU a vmapped rollout of the learned
+  simulator costs more per scene than one scene alone even without padding
+  (14 test scenes of the small model, equal node counts: 1.13-1.2x in
+  pairs, 1.2-1.28x in threes, 1.45-1.54x in fives; docs/performance.md):
+  its working set outgrows the cache and there is no per-operation
+  overhead to share."""
+  return 1 if jax.default_backend() == "cpu" else None
+
+
 def rollout_buckets(predictor, params, scenes: Sequence[SceneNodes],
                     n_steps: int, context: simulator.Context,
                     spec: graph.GraphSpec,
                     bucket_ratio: float = simulation.BUCKET_RATIO,
+                    max_batch: int | None = None,
                     **kwargs) -> list[Rollout]:
   """``rollout_batch`` over groups of scenes of similar size.
 
   Scenes whose node counts are within ``bucket_ratio`` of each other share
   one batched program (``mpm.simulation.size_buckets``, as the MPM's
-  ``simulate_batch``), so a small scene is not padded to the largest;
-  other keyword arguments are ``rollout_batch``'s.
+  ``simulate_batch``), so a small scene is not padded to the largest; a
+  group larger than ``max_batch`` runs as several batches (None:
+  ``default_max_batch()``, one scene at a time on the CPU). Other keyword
+  arguments are ``rollout_batch``'s.
 
   Returns:
     B ``Rollout``s in the order of ``scenes``.
   """
+  if max_batch is None:
+    max_batch = default_max_batch() or len(scenes)
+  if max_batch < 1:
+    raise ValueError(f"rollout_buckets: max_batch = {max_batch}; allowed: "
+                     ">= 1 or None")
   groups = simulation.size_buckets([len(sc.types) for sc in scenes],
                                    bucket_ratio)
   out: list[Rollout | None] = [None] * len(scenes)
   for group in groups:
-    results = rollout_batch(predictor, params, [scenes[i] for i in group],
-                            n_steps, context, spec, **kwargs)
-    for i, result in zip(group, results):
-      out[i] = result
+    for start in range(0, len(group), max_batch):
+      part = group[start:start + max_batch]
+      results = rollout_batch(predictor, params, [scenes[i] for i in part],
+                              n_steps, context, spec, **kwargs)
+      for i, result in zip(part, results):
+        out[i] = result
   return out
 
 

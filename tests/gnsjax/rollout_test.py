@@ -3,6 +3,7 @@
 import dataclasses
 import functools
 import time
+from unittest import mock
 
 from absl.testing import absltest
 import jax
@@ -364,12 +365,43 @@ class RolloutBatchTest(absltest.TestCase):
         len(mpm.simulation.size_buckets(sizes, ratio)), 2)
     buckets = rollout.rollout_buckets(
         self.predictor, self.params, self.scenes, self.STEPS,
-        self.problem.context, self.problem.spec, bucket_ratio=ratio, chunk=4)
+        self.problem.context, self.problem.spec, bucket_ratio=ratio,
+        max_batch=3, chunk=4)
     self.assertLen(buckets, 3)
     for pred, bucket in zip(self.batched, buckets):
       self.assertEqual(bucket.positions.shape, pred.positions.shape)
       np.testing.assert_allclose(bucket.positions, pred.positions, rtol=0,
                                  atol=1e-5)
+
+  def test_max_batch_splits_a_bucket(self):
+    # One bucket of all three scenes, run as batches of at most two, and by
+    # default on the CPU one at a time: the same results, in order.
+    sizes = [len(sc.types) for sc in self.scenes]
+    ratio = max(sizes) / min(sizes)
+    self.assertLen(mpm.simulation.size_buckets(sizes, ratio), 1)
+    self.assertEqual(rollout.default_max_batch(), 1)   # the suite's CPU
+    calls = []
+    real = rollout.rollout_batch
+
+    def counted(predictor, params, scenes, *args, **kwargs):
+      calls.append(len(scenes))
+      return real(predictor, params, scenes, *args, **kwargs)
+
+    with mock.patch.object(rollout, "rollout_batch", counted):
+      for max_batch, expected in ((2, [2, 1]), (None, [1, 1, 1])):
+        calls.clear()
+        out = rollout.rollout_buckets(
+            self.predictor, self.params, self.scenes, self.STEPS,
+            self.problem.context, self.problem.spec, bucket_ratio=ratio,
+            max_batch=max_batch, chunk=4)
+        self.assertEqual(calls, expected)
+        for pred, got in zip(self.batched, out):
+          np.testing.assert_allclose(got.positions, pred.positions, rtol=0,
+                                     atol=1e-5)
+    with self.assertRaisesRegex(ValueError, "max_batch = 0"):
+      rollout.rollout_buckets(self.predictor, self.params, self.scenes,
+                              self.STEPS, self.problem.context,
+                              self.problem.spec, max_batch=0)
 
   def test_reallocation_equals_ample_capacity(self):
     # No headroom: reallocated lists overflow again as soon as any scene gains
