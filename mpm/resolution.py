@@ -122,6 +122,7 @@ def cheapest(table: Mapping[str, Any], tolerance: float,
   Raises:
     InputError: bad tolerance or metric, or no configuration meets the
       tolerance (the message names the most accurate one and its error).
+      The table's reference is never a candidate.
   """
   if not (isinstance(tolerance, (int, float)) and tolerance > 0
           and math.isfinite(tolerance)):
@@ -130,8 +131,11 @@ def cheapest(table: Mapping[str, Any], tolerance: float,
   names = matching_scenes(table, scene)
   errors = point_errors(table, metric, names)
   key = "seconds_batched" if batched else "seconds"
+  # The reference's errors are against itself (zero): not a measurement.
+  reference = table.get("reference", {}).get("name")
   candidates = [p for p in table["points"]
-                if p.get(key) is not None and p["name"] in errors]
+                if p.get(key) is not None and p["name"] in errors
+                and p["name"] != reference]
   meeting = [p for p in candidates if errors[p["name"]] <= tolerance]
   if not meeting:
     best = min(candidates, key=lambda p: errors[p["name"]])

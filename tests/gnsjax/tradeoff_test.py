@@ -90,6 +90,20 @@ class CheapestTest(absltest.TestCase):
     with self.assertRaisesRegex(mpm.InputError, r"slow, reaches 0\.02"):
       tradeoff.cheapest(TABLE, 0.001)
 
+  def test_the_reference_is_never_picked(self):
+    # A study's reference has zero error against itself: with "slow" as the
+    # reference, a tolerance only it meets is refused, naming "middle".
+    table = {**TABLE, "reference": {"name": "slow"}}
+    with self.assertRaisesRegex(mpm.InputError, r"middle, reaches 0\.12"):
+      tradeoff.cheapest(table, 0.05)
+    self.assertEqual(tradeoff.cheapest(table, 0.2).point["name"], "middle")
+    # The committed study: 2.5 mm is its reference, 3.5 mm its finest row.
+    study = tradeoff.load(os.path.join(
+        os.path.dirname(__file__), "..", "..", "docs", "results", "tradeoff",
+        "tradeoff.json"))
+    with self.assertRaisesRegex(mpm.InputError, "mpm_0.0035, reaches"):
+      tradeoff.cheapest(study, 0.001)
+
   def test_a_broken_run_never_meets_a_tolerance(self):
     table = {"points": TABLE["points"][:1],
              "rows": [row("fast", "a", 0, [], math.nan)]}
