@@ -9,7 +9,10 @@
    whole grid, and a paper scene both ways (every windowed run checked
    against the whole grid's positions);
 2. the speed/accuracy study's scenes one at a time, as one padded batch and
-   in size buckets (per trajectory).
+   in size buckets (per trajectory);
+3. a scene that rests for its last 40% of frames, stepped to the end and
+   stopped at rest (``rest_speed``): the time and the last frame's
+   difference.
 
 ``timing``'s rules: compilation apart (each configuration is run once to
 compile, then ``repeats`` times), ``SimulationResult.wall_time_s``, which
@@ -44,6 +47,10 @@ class Sizes:
     seed: the paper scene's seed.
     batch_scenes: scenes of the study's test plan in the batch rows.
     batch_spacing: their particle spacing (m).
+    rest_frames: frames of the resting scene (the first test-plan scene
+      without obstacles, at ``batch_spacing``; at rest_speed 5 mm/s it
+      stops at frame 600, so 1000 frames rest for their last 40%).
+    rest_speed: the stop's speed threshold (m/s).
   """
   scales: tuple[float, ...] = (1.0, 2.0, 4.0)
   column_frames: int = 300
@@ -54,13 +61,15 @@ class Sizes:
   seed: int = 3
   batch_scenes: int = 14
   batch_spacing: float = 0.005
+  rest_frames: int = 1000
+  rest_speed: float = 0.005
 
 
 FULL = Sizes()
 QUICK = Sizes(scales=(1.0, 2.0), column_frames=21, paper_frames=11,
               paper_particles=200, paper_fine_spacing=0.01, repeats=1,
               batch_scenes=3,
-              batch_spacing=0.02)
+              batch_spacing=0.02, rest_frames=121, rest_speed=10.0)
 
 # The column: 0.19 x 0.2 m of sand (about 380 particles at 1 cm) on a flat
 # floor at the left of a 0.9 x 0.5 m domain, grid spacing 1 cm, as in
@@ -126,8 +135,34 @@ def measure(sizes: Sizes, log: Callable[[str], None]) -> dict[str, Any]:
   log(f"paper scene: {paper}")
   batches = measure_batches(sizes)
   log(f"batches: {batches}")
+  rest = measure_rest(sizes)
+  log(f"rest: {rest}")
   return {"sizes": dataclasses.asdict(sizes), "columns": columns,
-          "paper_scene": paper, "batches": batches}
+          "paper_scene": paper, "batches": batches, "rest": rest}
+
+
+def measure_rest(sizes: Sizes) -> dict[str, Any]:
+  """The resting scene stepped to its last frame and stopped at rest:
+  medians of ``repeats`` after a warm-up, and how far the stop's last
+  frame lies from the stepped one's."""
+  spec = dataset.DatasetSpec(num_train=1, num_test=7,
+                             num_frames=sizes.rest_frames,
+                             spacing=dataset.PAPER_SPACING)
+  plain = next(p.scene for p in dataset.plan(spec)
+               if p.split == "test" and not p.scene.obstacles)
+  scene = resolution.at_spacing(plain, sizes.batch_spacing)
+  full_run, full = timing.self_timed(lambda: mpm.simulate(scene),
+                                     sizes.repeats, lambda r: r.wall_time_s)
+  rest_run, rest = timing.self_timed(
+      lambda: mpm.simulate(scene, rest_speed=sizes.rest_speed),
+      sizes.repeats, lambda r: r.wall_time_s)
+  return {"scene": scene.name, "frames": scene.num_frames,
+          "particles": int(full_run.positions.shape[1]),
+          "rest_speed": sizes.rest_speed, "rest_frame": rest_run.rest_frame,
+          "stepped": full, "stopped": rest,
+          "stopped_over_stepped": rest["median_s"] / full["median_s"],
+          "last_frame_difference_m": float(np.abs(
+              rest_run.positions[-1] - full_run.positions[-1]).max())}
 
 
 def measure_batches(sizes: Sizes) -> dict[str, Any]:
@@ -218,6 +253,19 @@ def to_markdown(result: dict[str, Any]) -> str:
       f"({b['one_batch_over_one_at_a_time']:.2f}x); {b['buckets']} size "
       f"buckets {t['size_buckets']['median_s']:.3f} "
       f"({b['buckets_over_one_at_a_time']:.2f}x).",
+      "",
+  ]
+  r = result["rest"]
+  rest_at = ("never" if r["rest_frame"] is None else
+             f"at frame {r['rest_frame']} of {r['frames']}")
+  lines += [
+      f"A scene that rests ({r['scene']}, {r['particles']} particles, "
+      f"{r['frames']} frames), stepped to the end "
+      f"{r['stepped']['median_s']:.3f} s; with `rest_speed="
+      f"{r['rest_speed']:g}` it stopped {rest_at}: "
+      f"{r['stopped']['median_s']:.3f} s "
+      f"({r['stopped_over_stepped']:.2f}x), its last frame at most "
+      f"{r['last_frame_difference_m'] * 1e3:.2f} mm from the stepped run's.",
       "",
   ]
   return "\n".join(lines)
