@@ -30,7 +30,7 @@ def get_config():
   # Noisy targets pushed out of the solids: the resting heap stops leaning
   # on the solid constraint (docs/gns.md). The shipped model learned it in
   # a 12000-step fine-tuning at lr 2e-5 (provenance.json); from scratch
-  # with it is not yet measured.
+  # with it, the same 40000 steps did worse (docs/gns.md).
   config.train.target_outside_solids = True
 
   config.train.num_steps = 40000
