@@ -167,10 +167,11 @@ class StudyTest(absltest.TestCase):
     self.assertIn("Command: `cmd`", text)
     self.assertIn("| MPM, spacing 20 mm (dx 40 mm) |", text)
     self.assertIn("GNS small", text)
-    # A tolerance no configuration but the reference meets.
-    self.assertIn("| all | mpm_0.01 (", text)
-    choice = tradeoff.cheapest(table, 1e-9)
-    self.assertEqual(choice.point["name"], "mpm_0.01")
+    # A tolerance only the reference meets (against itself): none.
+    self.assertIn("| all | small (", text)
+    self.assertRegex(text, r"\| all \| [^|]+ \| none \|")
+    with self.assertRaisesRegex(mpm.InputError, "no configuration meets"):
+      tradeoff.cheapest(table, 1e-9)
 
 
 class SettingsTest(absltest.TestCase):
@@ -222,8 +223,9 @@ class RunTest(absltest.TestCase):
     # Coarse to fine, whatever the order asked.
     self.assertEqual([p["name"] for p in table["points"]],
                      ["mpm_0.04", "mpm_0.02"])
-    self.assertEqual(tradeoff.cheapest(table, 1e-9).point["name"],
-                     "mpm_0.02")
+    # The reference (2 cm) is never the answer, however tight the tolerance.
+    with self.assertRaisesRegex(mpm.InputError, "mpm_0.04, reaches"):
+      tradeoff.cheapest(table, 1e-9)
     self.assertEqual([p["scenes"] for p in summary["picks"]],
                      ["all", "none"])
     self.assertIn("Settings: `{", study.report(summary))

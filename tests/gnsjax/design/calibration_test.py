@@ -48,7 +48,9 @@ class CalibrationTest(absltest.TestCase):
     theta = np.array([33.0, 0.5])
     batched = self.problem(theta[None])[0]
     value, grad = self.problem.value_and_grad(theta)
-    np.testing.assert_allclose(value, batched, rtol=1e-5)
+    # A vmapped program is not the same float32 arithmetic as the single
+    # one: 2.5e-5 apart on an AMD EPYC CPU, 1e-5 elsewhere.
+    np.testing.assert_allclose(value, batched, rtol=1e-4)
     # Basal friction above the truth: the deposit stops short, and the
     # gradient says lower it.
     self.assertGreater(grad[1], 0)
