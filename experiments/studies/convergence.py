@@ -223,16 +223,12 @@ class Settings(settings.Base):
   rheologies: tuple[str, ...] = settings.field(
       ("drucker_prager",), "Rheologies of the sand, each run at every "
       "spacing (mu_i: mu(I) with its defaults, docs/physics.md).",
-      choices=tuple(scene_lib.RHEOLOGIES))
+      choices=tuple(scene_lib.RHEOLOGIES), distinct=True)
   command: str = settings.field(
       "", "The command line that asked for the run, for the report ('': "
       "the settings are reported).", flag=False)
 
   def validate(self):
-    if len(set(self.rheologies)) != len(self.rheologies):
-      raise settings.InputError(
-          f"--rheologies={','.join(self.rheologies)}: allowed: distinct "
-          f"values of {list(scene_lib.RHEOLOGIES)}")
     if not self.aspect_ratios and not self.paper_scenes:
       raise settings.InputError(
           "--aspect_ratios is empty and so is --paper_scenes: nothing to "

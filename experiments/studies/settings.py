@@ -39,7 +39,8 @@ _SCALARS = (bool, int, float, str)
 def field(default: Any, help: str, *, lower: float | None = None,  # pylint: disable=redefined-builtin
           upper: float | None = None, strict: bool = False,
           choices: tuple[str, ...] | None = None,
-          allow_empty: bool = False, flag: bool = True):
+          allow_empty: bool = False, distinct: bool = False,
+          flag: bool = True):
   """A settings field with its help text and checks.
 
   Args:
@@ -49,11 +50,13 @@ def field(default: Any, help: str, *, lower: float | None = None,  # pylint: dis
     strict: the lower bound itself is not allowed.
     choices: the allowed strings (each element of a sequence).
     allow_empty: an empty sequence is allowed.
+    distinct: a sequence may not repeat a value.
     flag: False for fields that no flag sets (set by the entry point).
   """
   return dataclasses.field(default=default, metadata={
       "help": help, "lower": lower, "upper": upper, "strict": strict,
-      "choices": choices, "allow_empty": allow_empty, "flag": flag})
+      "choices": choices, "allow_empty": allow_empty, "distinct": distinct,
+      "flag": flag})
 
 
 def element_type(annotation) -> tuple[type, bool, bool]:
@@ -83,6 +86,11 @@ def check_value(name: str, value, kind: type, sequence: bool,
                        "list of at least one value")
     for v in value:
       _check_scalar(name, v, kind, meta)
+    if meta.get("distinct") and len(set(value)) != len(value):
+      choices = meta.get("choices")
+      raise InputError(f"--{name}={','.join(map(str, value))}: allowed: "
+                       "distinct values"
+                       + (f" of {list(choices)}" if choices else ""))
   else:
     _check_scalar(name, value, kind, meta)
 

@@ -85,16 +85,12 @@ class Settings(settings.Base):
       upper=0.1)
   rheologies: tuple[str, ...] = settings.field(
       ("drucker_prager", "mu_i"), "Rheologies, each run on every case.",
-      choices=tuple(scene_lib.RHEOLOGIES))
+      choices=tuple(scene_lib.RHEOLOGIES), distinct=True)
   command: str = settings.field(
       "", "The command line that asked for the run, for the report.",
       flag=False)
 
   def validate(self):
-    if len(set(self.rheologies)) != len(self.rheologies):
-      raise settings.InputError(
-          f"--rheologies={','.join(self.rheologies)}: allowed: distinct "
-          f"values of {list(scene_lib.RHEOLOGIES)}")
     if not self.aspect_ratios and not self.incline_angles:
       raise settings.InputError(
           "--aspect_ratios and --incline_angles are both empty: nothing to "
