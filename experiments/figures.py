@@ -430,8 +430,8 @@ def column_validation(rows: Sequence[dict], deposits: dict, path: str,
   the runout against aspect ratio per rheology, with the linear law
   (``slope`` a +- ``band``, a <= 1) and a^``exponent`` through the measured
   a = 2 point; h0 / h likewise with a^``height_exponent``; and the final
-  deposits' surfaces (the highest particle per bin), in units of the
-  column's width L0, a colour per aspect ratio, a line style per rheology."""
+  deposits' surfaces, ``deposits[rheology]`` = [(aspect ratio, x / L0,
+  height / L0)], a colour per aspect ratio, a line style per rheology."""
   rheologies = list(dict.fromkeys(r["rheology"] for r in rows))
   fig, axes = plt.subplots(1, 3, figsize=(15.0, 4.2))
   a = np.geomspace(0.3, 1.0, 20)
@@ -463,15 +463,9 @@ def column_validation(rows: Sequence[dict], deposits: dict, path: str,
   aspects = sorted({r["aspect_ratio"] for r in rows})
   colours = plt.get_cmap("viridis")
   for j, rheology in enumerate(rheologies):
-    for aspect, scene, x in deposits.get(rheology, []):
-      width0, floor = scene.granular.box[2], scene.granular.box[1]
-      step = 2 * scene.granular.spacing
-      bins = np.floor(x[:, 0] / step).astype(int)
-      top = np.full(bins.max() + 1, np.nan)
-      np.fmax.at(top, bins, x[:, 1] - floor)
+    for aspect, x, height in deposits.get(rheology, []):
       k = aspects.index(aspect)
-      ax.plot((np.arange(len(top)) + 0.5) * step / width0, top / width0,
-              styles[j % len(styles)],
+      ax.plot(x, height, styles[j % len(styles)],
               color=colours(k / max(len(aspects) - 1, 1)),
               label=f"a = {aspect:g}, {rheology}")
   ax.set_xlabel("x / L0")

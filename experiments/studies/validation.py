@@ -48,7 +48,7 @@ from mpm import scene as scene_lib
 
 LUBE_SLOPE, LUBE_BAND = 1.2, 0.2    # (L - L0) / L0 = 1.2 a +- 20%, a <= 1
 TALL = 2.0                          # the tall columns' regime: a >= 2
-RUNOUT_EXPONENT = (2 / 3, 0.65, 0.05)   # Lube/Lajeunesse; B&K +- their spread
+RUNOUT_EXPONENT = 2 / 3             # tall columns (Lube; Lajeunesse)
 HEIGHT_EXPONENT = 0.5               # h0 / h ~ a^0.5 (B&K, narrow slots)
 # The incline's surface speed: the mean of the top tenth of the layer,
 # against the Bagnold profile's mean over the same tenth.
@@ -128,19 +128,26 @@ class Settings(settings.Base):
             for a in self.aspect_ratios]
 
 
+def deposit_surface(x: np.ndarray, spacing: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+  """The surface of a deposit x [N, 2] (m): bin centres along x and the
+  highest particle above the floor in each bin 2 ``spacing`` wide (m; NaN
+  in an empty bin)."""
+  bins = np.floor(x[:, 0] / (2 * spacing)).astype(int)
+  surface = np.full(bins.max() + 1, np.nan)
+  np.fmax.at(surface, bins, x[:, 1] - convergence.FLOOR)
+  return (np.arange(len(surface)) + 0.5) * 2 * spacing, surface
+
+
 def column_measures(x: np.ndarray, aspect: float, height: float,
                     spacing: float) -> dict[str, float]:
   """Runout, final height and flank angle of a final deposit x [N, 2] (m)
   of a column of ``height`` h0 (m) and aspect ratio ``aspect``."""
   width0 = height / aspect
-  y = x[:, 1] - convergence.FLOOR
-  top = float(np.max(y))
-  # The surface: the highest particle in each column of bins 2 spacings
-  # wide; the flank, where it lies between 20% and 80% of the top.
-  bins = np.floor(x[:, 0] / (2 * spacing)).astype(int)
-  surface = np.full(bins.max() + 1, np.nan)
-  np.fmax.at(surface, bins, y)
-  centres = (np.arange(len(surface)) + 0.5) * 2 * spacing
+  centres, surface = deposit_surface(x, spacing)
+  top = float(np.nanmax(surface))
+  # The flank: where the surface lies between 20% and 80% of the top,
+  # beyond its highest point.
   flank = (surface > 0.2 * top) & (surface < 0.8 * top) & (
       centres > centres[np.nanargmax(surface)])
   angle = (math.degrees(math.atan(-np.polyfit(
@@ -178,7 +185,10 @@ def _column_rows(s: Settings, deposits: dict) -> list[dict]:
       scene = s.column(aspect, rheology)
       result = mpm.simulate(scene)
       x = np.asarray(result.positions)
-      deposits.setdefault(rheology, []).append((aspect, scene, x[-1]))
+      centres, surface = deposit_surface(x[-1], s.spacing)
+      width0 = s.height / aspect
+      deposits.setdefault(rheology, []).append(
+          (aspect, centres / width0, surface / width0))
       row = {"rheology": rheology, "aspect_ratio": aspect,
              **column_measures(x[-1], aspect, s.height, s.spacing),
              "still_moving_m": float(np.abs(x[-1] - x[-11]).max()),
@@ -286,7 +296,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   mpm_io.write_csv(os.path.join(out_dir, "incline.csv"), slope_rows)
   if column:
     figures.column_validation(column, deposits, os.path.join(
-        out_dir, "column.png"), LUBE_SLOPE, LUBE_BAND, RUNOUT_EXPONENT[0],
+        out_dir, "column.png"), LUBE_SLOPE, LUBE_BAND, RUNOUT_EXPONENT,
         HEIGHT_EXPONENT)
   if slope_rows:
     figures.incline_profiles(profiles, os.path.join(out_dir, "incline.png"))
