@@ -1,21 +1,25 @@
 #!/usr/bin/env bash
-# Every accelerator figure, on a bare accelerator machine, in two commands of
-# under 9 minutes each (docs/performance.md, "On an accelerator"):
+# Every accelerator figure, on a bare accelerator machine, in one command of
+# under 10 minutes (docs/performance.md, "On an accelerator"):
 #
-#   bash experiments/benchmarks/gpu.sh mpm          # the first command
-#   bash experiments/benchmarks/gpu.sh gns,train    # the second
+#   bash experiments/benchmarks/gpu.sh                 # mpm, gns, train
+#   bash experiments/benchmarks/gpu.sh gns             # one part again
 #
 # sent with the ignored .whl/ carried (`make wheels` here first). It installs
 # those wheels into /tmp/site (the machine has jax, flax, optax, orbax, h5py,
 # absl-py, tqdm and matplotlib but not jraph, jax-md, ml-collections, cma or
-# tensorboardX), runs the parts into out/gpu/ (kept between commands while the
-# machine stays warm, so the second report holds every part) and copies the
-# part files, the report and the log into $OUT. A part killed by the time
-# limit leaves no file; the parts before it stay. Rebuild the report here
-# from the files that came back: python -m experiments.benchmarks
+# tensorboardX), runs each part in a process of its own under its own time
+# limit (GPU_PART_LIMITS_S, seconds, default "mpm=230 gns=180 train=140":
+# 550 s in all, so that a 15-minute lease holds the machine's start, this
+# and a rerun of one part) into out/gpu/, then the report, and copies the
+# part files, the report and the log into $OUT. A part writes its file after
+# each measurement, so one stopped by its limit keeps what it finished (the
+# report marks it partial); the parts after it still run. Rebuild the report
+# here from the files that came back: python -m experiments.benchmarks
 # --what=gpu --gpu_parts=report --out=DIR.
 set -u
 parts=${1:-mpm,gns,train}
+limits=${GPU_PART_LIMITS_S:-mpm=230 gns=180 train=140}
 out=${OUT:-out/gpu_results}
 site=/tmp/site
 mkdir -p "$out" out/gpu
@@ -27,9 +31,19 @@ log="$out/gpu_${parts//,/_}.log"
 { nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv
   python3 -c "import jax, flax; print('jax', jax.__version__, 'flax',
 flax.__version__, jax.devices())"; } > "$log" 2>&1
-timeout "${GPU_BENCH_LIMIT_S:-525}" python3 -m experiments.benchmarks \
-  --what=gpu --gpu_parts="$parts" --out=out/gpu >> "$log" 2>&1
-rc=$?
+rc=0
+for part in ${parts//,/ }; do
+  limit=$(tr ' ' '\n' <<< "$limits" | sed -n "s/^$part=//p")
+  echo "== $part (limit ${limit:-none} s) $(date -u +%T)" >> "$log"
+  timeout "${limit:-600}" python3 -m experiments.benchmarks --what=gpu \
+    --gpu_parts="$part" --out=out/gpu >> "$log" 2>&1
+  r=$?
+  [ $r -eq 124 ] && echo "== $part stopped by its limit" >> "$log"
+  [ $r -ne 0 ] && rc=$r
+done
+echo "== report $(date -u +%T)" >> "$log"
+python3 -m experiments.benchmarks --what=gpu --gpu_parts=report \
+  --out=out/gpu >> "$log" 2>&1 || rc=$?
 cp out/gpu/gpu_*.json out/gpu/gpu_benchmark.md "$out"/ 2>/dev/null
-tail -n 40 "$log"
+tail -n 60 "$log"
 exit $rc

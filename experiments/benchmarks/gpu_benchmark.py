@@ -2,8 +2,8 @@
 
   python -m experiments.benchmarks --what=gpu --out=DIR \\
       [--gpu_parts=mpm,gns,train] [--cpu_reference=FILE]
-  bash experiments/benchmarks/gpu.sh mpm          # on an accelerator machine
-  bash experiments/benchmarks/gpu.sh gns,train    # (docs/performance.md)
+  bash experiments/benchmarks/gpu.sh     # on an accelerator machine
+                                         # (docs/performance.md)
 
 One library call per part, :func:`run_part`, measures on this process's
 first device and writes ``<stem>_<part>.json``; :func:`write_report`
@@ -170,9 +170,9 @@ class Sizes:
   train_config: str = "paper"
   train_trajectories: int = 2
   train_frames: int = 600
-  train_warmup: int = 100
-  train_steps: int = 400
-  train_log_every: int = 50
+  train_warmup: int = 50
+  train_steps: int = 200
+  train_log_every: int = 25
 
 
 # On an accelerator: whole trajectories everywhere.
@@ -341,9 +341,13 @@ def agreement_frames(sizes: Sizes) -> list[int]:
   return [min(AGREEMENT_EARLY_FRAME, sizes.frames - 1), sizes.frames - 1]
 
 
-def measure_mpm(sizes: Sizes, log: Callable[[str], None]) -> dict[str, Any]:
-  """The mpm part: one at a time, vmapped, the largest batch, the dataset,
-  the spacings; the positions compared for agreement."""
+def measure_mpm(sizes: Sizes, log: Callable[[str], None],
+                save: Callable[[dict], None],
+                agree: Callable[[dict], None]) -> dict[str, Any]:
+  """The mpm part: one at a time and its agreement (``agree`` adds the
+  comparisons to ``out["agreement"]``), vmapped, the largest batch, the
+  dataset, the spacings; ``save`` is called with what is measured so far
+  after each of them, the most telling first."""
   scene = paper_scene(sizes.frames)
   setup = mpm.setup(scene)
   n, nsub = setup.n_particles, setup.n_substeps
@@ -367,6 +371,11 @@ def measure_mpm(sizes: Sizes, log: Callable[[str], None]) -> dict[str, Any]:
       f"{walls['median_s']:.3f} s per {sizes.frames}-frame trajectory "
       f"({out['single']['particle_substeps_per_s']:.3g} particle-substeps/s;"
       f" compile {first.compile_time_s:.1f} s excluded)")
+  frames = agreement_frames(sizes)
+  out["agreement"] = {"frames": frames,
+                      "positions": encode_positions(first.positions[frames])}
+  agree(out)
+  save(out)
 
   out["vmapped"] = []
   for b in sizes.batch_sizes:
@@ -380,13 +389,16 @@ def measure_mpm(sizes: Sizes, log: Callable[[str], None]) -> dict[str, Any]:
         f"{row['s_per_trajectory']:.4f} s per trajectory"
         + (" (extrapolated)" if row["extrapolated"] else "")
         + f", {row['particle_substeps_per_s']:.3g} particle-substeps/s")
+    save(out)
 
   out["largest_batch"] = measure_largest_batch(scene, setup, sizes, log)
+  save(out)
   out["dataset"] = measure_dataset(sizes, log)
-  out["spacings"] = measure_spacings(sizes, log)
-  frames = agreement_frames(sizes)
-  out["agreement"] = {"frames": frames,
-                      "positions": encode_positions(first.positions[frames])}
+  save(out)
+  out["spacings"] = []
+  for spacing in sizes.spacings:
+    out["spacings"].append(measure_spacing(sizes, spacing, log))
+    save(out)
   return out
 
 
@@ -450,23 +462,20 @@ def measure_dataset(sizes: Sizes, log: Callable[[str], None]
   return out
 
 
-def measure_spacings(sizes: Sizes, log: Callable[[str], None]) -> list[dict]:
-  """Seconds per trajectory of the paper scene at each spacing of the
+def measure_spacing(sizes: Sizes, spacing: float,
+                    log: Callable[[str], None]) -> dict[str, Any]:
+  """Seconds per trajectory of the paper scene at one spacing (m) of the
   speed/accuracy study (``experiments.studies.tradeoff.at_spacing``)."""
-  rows = []
-  for spacing in sizes.spacings:
-    scene = tradeoff_study.at_spacing(paper_scene(sizes.frames), spacing)
-    first, walls = timing.self_timed(lambda s=scene: mpm.simulate(s),
-                                     max(1, sizes.repeats - 1),
-                                     lambda r: r.wall_time_s)
-    rows.append({"spacing_m": spacing,
-                 "particles": scene.granular.num_particles,
-                 "n_substeps_per_frame": first.n_substeps,
-                 "s_per_trajectory": walls["median_s"], **walls,
-                 "compile_s": first.compile_time_s})
-    log(f"spacing {spacing * 1000:g} mm ({scene.granular.num_particles} "
-        f"particles): {walls['median_s']:.3f} s per trajectory")
-  return rows
+  scene = tradeoff_study.at_spacing(paper_scene(sizes.frames), spacing)
+  first, walls = timing.self_timed(lambda: mpm.simulate(scene),
+                                   max(1, sizes.repeats - 1),
+                                   lambda r: r.wall_time_s)
+  log(f"spacing {spacing * 1000:g} mm ({scene.granular.num_particles} "
+      f"particles): {walls['median_s']:.3f} s per trajectory")
+  return {"spacing_m": spacing, "particles": scene.granular.num_particles,
+          "n_substeps_per_frame": first.n_substeps,
+          "s_per_trajectory": walls["median_s"], **walls,
+          "compile_s": first.compile_time_s}
 
 
 # ------------------------------------------------------------------ gns ---
@@ -497,10 +506,12 @@ def paper_problem(config, positions: np.ndarray,
 
 
 def measure_gns(sizes: Sizes, log: Callable[[str], None],
+                save: Callable[[dict], None],
                 twin: Callable[[str], dict] | None,
                 reference: dict | None) -> dict[str, Any]:
   """The gns part: rollouts of the paper trajectory alone and batched, the
-  small model on its scene, and the agreement of its rollout."""
+  small model on its scene, and the agreement of its rollout; ``save`` is
+  called with what is measured so far after the rollouts."""
   config = gns_programs.load_config(sizes.gns_config)
   # The paper scene at the config's dataset spacing (the paper's: itself).
   scene = tradeoff_study.at_spacing(paper_scene(sizes.frames),
@@ -553,6 +564,7 @@ def measure_gns(sizes: Sizes, log: Callable[[str], None],
     log(f"{sizes.gns_config} model rollout x{b}: {t['median_s']:.3f} s for "
         f"{steps} steps -> {row['s_per_simulation']:.4f} s per simulation"
         + (" (extrapolated)" if row["extrapolated"] else ""))
+  save(out)
   out["small_model"] = measure_small_model(sizes, log, twin, reference)
   return out
 
@@ -808,7 +820,11 @@ def run_part(part: str, out_dir: str, *, quick: bool = False,
   ``accelerator`` (default: whether the first device is not a CPU) picks
   the role: sizes, file names, and the comparisons with a CPU twin
   process and ``reference`` (tests take the accelerator's path on the
-  CPU)."""
+  CPU). The file is rewritten after each measurement with what is
+  measured so far and ``"complete": false``, and with ``true`` at the end:
+  a part stopped by a time limit keeps its finished rows."""
+  if part not in PARTS:
+    raise ValueError(f"part {part!r}; allowed: {PARTS}")
   if accelerator is None:
     accelerator = is_accelerator()
   sizes = sizes_for(accelerator, quick)
@@ -816,27 +832,32 @@ def run_part(part: str, out_dir: str, *, quick: bool = False,
       "part": part, "command": command,
       "environment": timing.environment(quick, device_kind=jax.devices()[0]
                                         .device_kind),
-      "sizes": dataclasses.asdict(sizes)}
+      "sizes": dataclasses.asdict(sizes), "complete": False}
+  os.makedirs(out_dir, exist_ok=True)
+  path = os.path.join(out_dir, f"{stem_for(accelerator)}_{part}"
+                      + ("_quick" if quick else "") + ".json")
+
+  def save(measured: dict[str, Any]) -> None:
+    # What is measured so far, so that a part stopped by a time limit keeps
+    # its finished rows (the report marks it partial).
+    results[part] = measured
+    timing.write_json(path, results)
+
   with tempfile.TemporaryDirectory() as work:
     twin = ((lambda kind: run_twin(kind, quick, work)) if accelerator
             else None)
     if part == "mpm":
-      results["mpm"] = measure_mpm(sizes, log)
-      mpm_agreement(results["mpm"], sizes, twin, reference,
-                    envelope_here=not accelerator)
+      measured = measure_mpm(sizes, log, save, lambda out: mpm_agreement(
+          out, sizes, twin, reference, envelope_here=not accelerator))
     elif part == "gns":
-      results["gns"] = measure_gns(sizes, log, twin, reference)
+      measured = measure_gns(sizes, log, save, twin, reference)
       if not accelerator:
-        gns_envelope_here(results["gns"], sizes)
-    elif part == "train":
-      results["train"] = measure_training(sizes, log, work)
+        gns_envelope_here(measured, sizes)
     else:
-      raise ValueError(f"part {part!r}; allowed: {PARTS}")
+      measured = measure_training(sizes, log, work)
   timing.end_environment(results["environment"])
-  os.makedirs(out_dir, exist_ok=True)
-  path = os.path.join(out_dir, f"{stem_for(accelerator)}_{part}"
-                      + ("_quick" if quick else "") + ".json")
-  timing.write_json(path, results)
+  results["complete"] = True
+  save(measured)
   return path
 
 
@@ -869,9 +890,13 @@ def write_report(out_dir: str, accelerator: bool, *, quick: bool = False,
     raise FileNotFoundError(
         f"{out_dir}: no {stem_for(accelerator)}_<part>"
         f"{'_quick' if quick else ''}.json to report on (parts: {PARTS})")
+  # A part stopped before its first measurement has nothing to report.
+  parts = {k: v for k, v in parts.items() if k in v}
   report = {"accelerator": accelerator, "reference_file": reference_path,
             "reference_environment": (reference or {}).get("environment"),
             "parts": {k: v[k] for k, v in parts.items()},
+            "complete": {k: v.get("complete", True)
+                         for k, v in parts.items()},
             "environments": {k: v["environment"] for k, v in parts.items()},
             "commands": {k: v["command"] for k, v in parts.items()},
             "summary": gpu_report.summarise(parts, reference)}

@@ -58,7 +58,7 @@ def summarise(parts: dict[str, dict], reference: dict | None
   s: dict[str, Any] = {}
   m, rm = _get(parts, "mpm", "mpm"), ref.get("mpm")
   if m:
-    best = max([r["particle_substeps_per_s"] for r in m["vmapped"]]
+    best = max([r["particle_substeps_per_s"] for r in m.get("vmapped", [])]
                + [_get(m, "largest_batch", "particle_substeps_per_s") or 0])
     s["mpm"] = {
         "single_s": m["single"]["median_s"],
@@ -66,7 +66,7 @@ def summarise(parts: dict[str, dict], reference: dict | None
         "best_particle_substeps_per_s": best,
         "target_particle_substeps_per_s": TARGET_PARTICLE_SUBSTEPS_PER_S,
         "target_met": best >= TARGET_PARTICLE_SUBSTEPS_PER_S,
-        "dataset_h": m["dataset"]["dataset_h"],
+        "dataset_h": _get(m, "dataset", "dataset_h"),
         "dataset_h_cpu": _get(rm, "dataset", "dataset_h")}
   g, rg = _get(parts, "gns", "gns"), ref.get("gns")
   if g:
@@ -158,7 +158,10 @@ def to_markdown(report: dict, reference: dict | None) -> str:
            ""]
   for part, env in report["environments"].items():
     lines.append(f"- {part}: `{report['commands'][part]}`; "
-                 f"{_env_line(env)}")
+                 f"{_env_line(env)}"
+                 + ("" if report.get("complete", {}).get(part, True) else
+                    "; **partial**: stopped before its end (a time limit),"
+                    " only what it finished is below"))
   if not cpu:
     lines.append(f"- CPU reference (`{report['reference_file']}`): "
                  + _env_line(report.get("reference_environment")))
@@ -185,38 +188,43 @@ def to_markdown(report: dict, reference: dict | None) -> str:
                  f"{_fmt(cpu_single, '.4g')} | "
                  f"{_x(cpu_single, single['s_per_trajectory'])} |")
     rv = _rows_by(_get(rm, "vmapped"), "batch")
-    for r in m["vmapped"]:
+    for r in m.get("vmapped", []):
       c = _get(rv, r["batch"], "s_per_trajectory")
       lines.append(f"| vmapped x{r['batch']} | {r['s_per_trajectory']:.4g}"
                    + (" (extrapolated)" if r["extrapolated"] else "") +
                    f" | {r['particle_substeps_per_s']:.3g} | "
                    f"{_fmt(c, '.4g')} | {_x(c, r['s_per_trajectory'])} |")
-    lb = m["largest_batch"]
+    lb = m.get("largest_batch", {})
     if "batch" in lb:
       lines.append(f"| largest batch, x{lb['batch']} ({lb['frames'] - 1} "
                    f"frames) | {lb['s_per_trajectory']:.4g} (extrapolated)"
                    f" | {lb['particle_substeps_per_s']:.3g} | - | - |")
     sm = s["mpm"]
-    lines += ["", f"- Sizing (`batch_size_for`): "
-              f"{lb['sizing']['batch']} scenes ({lb['sizing']['source']}; "
-              f"{lb['sizing']['per_scene_bytes'] / 2**20:.2f} MiB per scene,"
-              f" {lb['sizing']['fixed_bytes'] / 2**20:.2f} MiB fixed), run "
-              f"at {lb.get('batch', 'none')} (cap {lb['cap']})"
-              + (f"; out of memory at {[f['batch'] for f in lb['failed']]}"
-                 if lb["failed"] else "") + ".",
-              f"- Target, batched MPM at least "
+    lines.append("")
+    if lb:
+      lines.append(
+          f"- Sizing (`batch_size_for`): "
+          f"{lb['sizing']['batch']} scenes ({lb['sizing']['source']}; "
+          f"{lb['sizing']['per_scene_bytes'] / 2**20:.2f} MiB per scene,"
+          f" {lb['sizing']['fixed_bytes'] / 2**20:.2f} MiB fixed), run "
+          f"at {lb.get('batch', 'none')} (cap {lb['cap']})"
+          + (f"; out of memory at {[f['batch'] for f in lb['failed']]}"
+             if lb["failed"] else "") + ".")
+    lines += [f"- Target, batched MPM at least "
               f"{TARGET_PARTICLE_SUBSTEPS_PER_S:.0e} particle-substeps/s: "
               + ("not an accelerator" if cpu else
                  f"{_met(sm['target_met'])} (best "
-                 f"{sm['best_particle_substeps_per_s']:.3g})") + ".",
-              f"- The paper's dataset ({PAPER_DATASET} trajectories of 600 "
+                 f"{sm['best_particle_substeps_per_s']:.3g})") + "."]
+    if "dataset" in m:
+      lines += [f"- The paper's dataset ({PAPER_DATASET} trajectories of 600 "
               f"frames), simulation only, extrapolated from one batch of "
               f"{m['dataset']['batch']} of its scenes run for "
               f"{m['dataset']['frames_run']} frames: "
               f"**{m['dataset']['dataset_h']:.3g} h**"
               + (f" (CPU reference: {sm['dataset_h_cpu']:.3g} h)"
-                 if sm.get("dataset_h_cpu") else "") + ".", ""]
-    if m["spacings"]:
+                 if sm.get("dataset_h_cpu") else "") + "."]
+    lines.append("")
+    if m.get("spacings"):
       rs = _rows_by(_get(rm, "spacings"), "spacing_m")
       lines += ["Speed/accuracy study's MPM rows (the paper scene at each "
                 "spacing; errors: docs/tradeoff.md):", "",
@@ -274,21 +282,22 @@ def to_markdown(report: dict, reference: dict | None) -> str:
               f"{_fmt(sg['mpm_same_device_over_gns'], '.3g')}x.",
               f"- The model: {md['parameters']} (see the module docstring).",
               ""]
-    sm = g["small_model"]
+    sm = g.get("small_model")
     rsm = _get(rg, "small_model")
-    lines += [f"The shipped small model on its scene ({sm['particles']} "
-              f"particles, {sm['steps']} steps of stride "
-              f"{sm['frame_stride']}): {sm['s_per_simulation']:.4g} s per "
-              "simulation"
-              + (f" (CPU reference: {rsm['s_per_simulation']:.4g} s, "
-                 f"{_x(rsm['s_per_simulation'], sm['s_per_simulation'])})"
-                 if rsm else "") + ".", "",
-              "### Agreement of the small model's rollout with a CPU", "",
-              f"Steps {sm['agreement']['steps']}. Tolerances: early max "
-              f"{EARLY_TOLERANCE_M:g} m; front and centre "
-              f"{FINAL_MEASURE_TOLERANCE_M:g} m at the end (single particles "
-              "are not compared there).", ""]
-    lines += _agreement_lines("GNS", sm["agreement"])
+    if sm is not None:
+      lines += [f"The shipped small model on its scene ({sm['particles']} "
+                f"particles, {sm['steps']} steps of stride "
+                f"{sm['frame_stride']}): {sm['s_per_simulation']:.4g} s per "
+                "simulation"
+                + (f" (CPU reference: {rsm['s_per_simulation']:.4g} s, "
+                   f"{_x(rsm['s_per_simulation'], sm['s_per_simulation'])})"
+                   if rsm else "") + ".", "",
+                "### Agreement of the small model's rollout with a CPU", "",
+                f"Steps {sm['agreement']['steps']}. Tolerances: early max "
+                f"{EARLY_TOLERANCE_M:g} m; front and centre "
+                f"{FINAL_MEASURE_TOLERANCE_M:g} m at the end (single "
+                "particles are not compared there).", ""]
+      lines += _agreement_lines("GNS", sm["agreement"])
   t = _get(parts, "train")
   if t:
     rt = ref.get("train")

@@ -109,6 +109,49 @@ class SmokeTest(absltest.TestCase):
       self.assertIn("The GPU benchmark's programs on this CPU", f.read())
 
 
+class StoppedPartTest(absltest.TestCase):
+
+  def test_a_part_stopped_midway_keeps_what_it_finished(self):
+    # A time limit stops the mpm part during its second batch (here: that
+    # batch's log line raises); the file holds the finished rows, marked
+    # incomplete, and the report shows them as partial.
+    d = fixtures.tempdir(self)
+
+    class Stop(Exception):
+      pass
+
+    def log(line):
+      if line.startswith("vmapped x2:"):
+        raise Stop(line)
+    with self.assertRaises(Stop):
+      gpu_benchmark.run_part("mpm", d, quick=True, accelerator=False,
+                             log=log)
+    with open(os.path.join(d, "gpu_cpu_mpm_quick.json")) as f:
+      part = json.load(f)
+    self.assertFalse(part["complete"])
+    m = part["mpm"]
+    self.assertGreater(m["single"]["median_s"], 0)
+    self.assertIn("envelope", m["agreement"])
+    self.assertEqual([r["batch"] for r in m["vmapped"]], [1])
+    self.assertNotIn("dataset", m)
+    # A part stopped before its first measurement is left out.
+    with open(os.path.join(d, "gpu_cpu_train_quick.json"), "w") as f:
+      json.dump({**{k: v for k, v in part.items() if k != "mpm"},
+                 "part": "train"}, f)
+    report = gpu_benchmark.write_report(d, False, quick=True)
+    self.assertEqual(report["complete"], {"mpm": False})
+    self.assertIn("**partial**", report["markdown"])
+    self.assertIn("| vmapped x1 |", report["markdown"])
+    self.assertNotIn("| vmapped x2 |", report["markdown"])
+    self.assertNotIn("The paper's dataset", report["markdown"])
+
+  def test_an_unknown_part_is_refused_before_any_file(self):
+    d = fixtures.tempdir(self)
+    with self.assertRaisesRegex(ValueError, "part 'gpu'; allowed"):
+      gpu_benchmark.run_part("gpu", os.path.join(d, "x"), quick=True)
+    self.assertFalse(os.path.exists(os.path.join(d, "x")))
+
+
 @pytest.mark.slow  # ~2 min of one core: two roles, a CPU twin process
 def test_accelerator_path_against_a_twin_and_the_reference(tmp_path):
   """The accelerator's path, taken on this CPU: a twin process and the
