@@ -9,8 +9,8 @@
 # those wheels into /tmp/site (the machine has jax, flax, optax, orbax, h5py,
 # absl-py, tqdm and matplotlib but not jraph, jax-md, ml-collections, cma or
 # tensorboardX), runs each part in a process of its own under its own time
-# limit (GPU_PART_LIMITS_S, seconds, default "mpm=230 gns=180 train=140":
-# 550 s in all, so that a 15-minute lease holds the machine's start, this
+# limit (GPU_PART_LIMITS_S, seconds, default "mpm=220 gns=175 train=135":
+# 530 s in all, so that a 15-minute lease holds the machine's start, this
 # and a rerun of one part) into out/gpu/, then the report, and copies the
 # part files, the report and the log into $OUT. A part writes its file after
 # each measurement, so one stopped by its limit keeps what it finished (the
@@ -19,7 +19,7 @@
 # --what=gpu --gpu_parts=report --out=DIR.
 set -u
 parts=${1:-mpm,gns,train}
-limits=${GPU_PART_LIMITS_S:-mpm=230 gns=180 train=140}
+limits=${GPU_PART_LIMITS_S:-mpm=220 gns=175 train=135}
 out=${OUT:-out/gpu_results}
 site=/tmp/site
 mkdir -p "$out" out/gpu
@@ -40,6 +40,7 @@ for part in ${parts//,/ }; do
   r=$?
   [ $r -eq 124 ] && echo "== $part stopped by its limit" >> "$log"
   [ $r -ne 0 ] && rc=$r
+  cp out/gpu/gpu_*.json "$out"/ 2>/dev/null  # back even if the call is cut
 done
 echo "== report $(date -u +%T)" >> "$log"
 python3 -m experiments.benchmarks --what=gpu --gpu_parts=report \
