@@ -9,9 +9,10 @@
 # those wheels into /tmp/site (the machine has jax, flax, optax, orbax, h5py,
 # absl-py, tqdm and matplotlib but not jraph, jax-md, ml-collections, cma or
 # tensorboardX), runs each part in a process of its own under its own time
-# limit (GPU_PART_LIMITS_S, seconds, default "mpm=220 gns=175 train=135":
+# limit (GPU_PART_LIMITS_S, seconds, default "mpm=160 gns=250 train=120":
 # 530 s in all, so that a 15-minute lease holds the machine's start, this
-# and a rerun of one part) into out/gpu/, then the report, and copies the
+# and a rerun of one part; on an H200 on 2026-11-26 the parts took 126 s,
+# about 230 s from a cold compilation cache, and 86 s) into out/gpu/, then the report, and copies the
 # part files, the report and the log into $OUT. A part writes its file after
 # each measurement, so one stopped by its limit keeps what it finished (the
 # report marks it partial); the parts after it still run. Rebuild the report
@@ -19,7 +20,7 @@
 # --what=gpu --gpu_parts=report --out=DIR.
 set -u
 parts=${1:-mpm,gns,train}
-limits=${GPU_PART_LIMITS_S:-mpm=220 gns=175 train=135}
+limits=${GPU_PART_LIMITS_S:-mpm=160 gns=250 train=120}
 out=${OUT:-out/gpu_results}
 site=/tmp/site
 mkdir -p "$out" out/gpu

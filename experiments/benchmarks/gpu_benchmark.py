@@ -642,9 +642,13 @@ def measure_small_model(sizes: Sizes, log: Callable[[str], None],
   if ref is not None:
     r = ref["small_model"]["agreement"]
     if r["steps"] == at:
-      x = small_rollout(run, start, steps, decode_positions(r["window"]))
-      out["agreement"]["reference"] = compare(
-          x[at], decode_positions(r["positions"]), "gns")
+      # At the CPU's precision: an accelerator's default float32 matmul may
+      # be TF32, which the twin's "default" row shows apart.
+      with jax.default_matmul_precision("highest"):
+        x = small_rollout(run, start, steps, decode_positions(r["window"]))
+      out["agreement"]["reference"] = {
+          **compare(x[at], decode_positions(r["positions"]), "gns"),
+          "precision": "highest"}
   return out
 
 
@@ -893,7 +897,9 @@ def write_report(out_dir: str, accelerator: bool, *, quick: bool = False,
   # A part stopped before its first measurement has nothing to report.
   parts = {k: v for k, v in parts.items() if k in v}
   report = {"accelerator": accelerator, "reference_file": reference_path,
-            "reference_environment": (reference or {}).get("environment"),
+            # The reference's parts ran on one machine: its first part's.
+            "reference_environment": next(iter(
+                (reference or {}).get("environments", {}).values()), None),
             "parts": {k: v[k] for k, v in parts.items()},
             "complete": {k: v.get("complete", True)
                          for k, v in parts.items()},

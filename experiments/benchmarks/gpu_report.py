@@ -135,6 +135,10 @@ def _agreement_lines(title: str, a: dict) -> list[str]:
     c = _get(a, *key)
     if c is None:
       continue
+    if key == ("reference",) and title == "GNS":
+      # Its precision is recorded since it was made "highest" (before:
+      # the device's default).
+      name += f", {c.get('precision', 'default')} precision"
     e, f = c["early"], c["final"]
     lines.append(f"| {name} | {e['max_m']:.2g} | {f['max_m']:.2g} | "
                  f"{f['rms_m']:.2g} | {f['front_1pct_m']:.2g} | "

@@ -172,6 +172,7 @@ def test_accelerator_path_against_a_twin_and_the_reference(tmp_path):
   g = acc["parts"]["gns"]["small_model"]["agreement"]
   for c in (g["twin"]["default"], g["twin"]["highest"], g["reference"]):
     assert c["agrees"], c
+  assert g["reference"]["precision"] == "highest"
   s = acc["summary"]
   single = ref["parts"]["mpm"]["single"]["median_s"]
   assert s["mpm"]["single_s_cpu"] == single
