@@ -1,7 +1,8 @@
 """The GPU command's report: the measured parts summed up against the
 paper's figures and the targets (``summarise``), and written as Markdown
 (``to_markdown``). Pure functions of the parts' JSON; the measuring is
-``experiments.benchmarks.gpu_benchmark``'s.
+``experiments.benchmarks.gpu_benchmark``'s (its parts ``gpu_mpm``,
+``gpu_gns`` and ``gpu_train``).
 """
 
 from typing import Any

@@ -1,6 +1,7 @@
-"""Tests for `experiments.benchmarks.gpu_benchmark`: the accelerator command
-end to end at tiny sizes on the CPU, both roles (the CPU reference, then the
-accelerator's path against it, with its CPU twin process)."""
+"""Tests for `experiments.benchmarks.gpu_benchmark` and its parts
+(`gpu_agreement`, `gpu_gns`): the accelerator command end to end at tiny
+sizes on the CPU, both roles (the CPU reference, then the accelerator's path
+against it, with its CPU twin process)."""
 
 import json
 import os
@@ -14,7 +15,9 @@ import numpy as np
 import pytest
 
 from experiments.benchmarks import __main__ as benchmarks_main
+from experiments.benchmarks import gpu_agreement
 from experiments.benchmarks import gpu_benchmark
+from experiments.benchmarks import gpu_gns
 from tests.experiments.benchmarks import fixtures
 
 
@@ -30,32 +33,32 @@ class HelpersTest(absltest.TestCase):
 
   def test_positions_round_trip_through_json(self):
     x = np.random.default_rng(0).normal(size=(2, 5, 2)).astype(np.float32)
-    back = gpu_benchmark.decode_positions(json.loads(json.dumps(
-        gpu_benchmark.encode_positions(x))))
+    back = gpu_agreement.decode_positions(json.loads(json.dumps(
+        gpu_agreement.encode_positions(x))))
     np.testing.assert_array_equal(back, x)
 
   def test_compare_applies_the_stated_tolerances(self):
     rng = np.random.default_rng(1)
     ref = rng.uniform(0.2, 1.2, size=(2, 300, 2)).astype(np.float32)
-    same = gpu_benchmark.compare(ref, ref, "mpm")
+    same = gpu_agreement.compare(ref, ref, "mpm")
     self.assertTrue(same["agrees"])
     moved = ref.copy()
     moved[0, 0] += 2e-5  # one particle early: over EARLY_TOLERANCE_M
-    c = gpu_benchmark.compare(moved, ref, "mpm")
+    c = gpu_agreement.compare(moved, ref, "mpm")
     self.assertFalse(c["agrees"])
     self.assertEqual([k for k, ok in c["checks"].items() if not ok],
                      ["early_max"])
     scattered = ref.copy()
     scattered[1] += rng.normal(0, 3e-3, size=scattered[1].shape)
     # Per particle at the end: the MPM is held to it, the GNS is not.
-    self.assertFalse(gpu_benchmark.compare(scattered, ref,
+    self.assertFalse(gpu_agreement.compare(scattered, ref,
                                            "mpm")["checks"]["final_rms"])
-    self.assertNotIn("final_rms", gpu_benchmark.compare(scattered, ref,
+    self.assertNotIn("final_rms", gpu_agreement.compare(scattered, ref,
                                                         "gns")["checks"])
 
   def test_one_ulp_moves_every_x_by_one_ulp(self):
     w = np.array([[[0.5, 0.25], [1.0, 1.5]]], np.float32)
-    shifted = gpu_benchmark.one_ulp(w)
+    shifted = gpu_agreement.one_ulp(w)
     np.testing.assert_array_equal(shifted[..., 1], w[..., 1])
     np.testing.assert_array_equal(shifted[..., 0],
                                   np.nextafter(w[..., 0], np.float32(2)))
@@ -65,7 +68,7 @@ class HelpersTest(absltest.TestCase):
                                      "dense_1": {"kernel": np.ones(2),
                                                  "bias": np.ones(2)}},
                          "node_encoder": {"dense_1": {"kernel": np.ones(2)}}}}
-    p = gpu_benchmark.still_decoder(params, hidden_layers=1)["params"]
+    p = gpu_gns.still_decoder(params, hidden_layers=1)["params"]
     self.assertEqual(float(p["decoder"]["dense_1"]["kernel"].sum()), 0)
     self.assertEqual(float(p["decoder"]["dense_1"]["bias"].sum()), 0)
     self.assertEqual(float(p["decoder"]["dense_0"]["kernel"].sum()), 2)
