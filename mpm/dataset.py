@@ -144,6 +144,55 @@ def plan(spec: DatasetSpec) -> list[PlannedScene]:
   return scenes
 
 
+def scene_key(scene: scene_lib.Scene) -> str:
+  """The scene apart from its name, as canonical JSON: two planned scenes
+  with the same key are the same simulation (the solver is deterministic),
+  so their trajectories are equal."""
+  d = scene.to_dict()
+  d.pop("name", None)
+  return json.dumps(d, sort_keys=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class Overlap:
+  """Repeated scenes in a plan (``overlap``).
+
+  Attributes:
+    distinct_train, distinct_test: distinct scenes per split.
+    test_in_train: names of test scenes equal to a training scene.
+    test_repeats: names of test scenes equal to an earlier test scene
+      (and to no training scene).
+  """
+  distinct_train: int
+  distinct_test: int
+  test_in_train: tuple[str, ...]
+  test_repeats: tuple[str, ...]
+
+  def seen(self, name: str) -> bool:
+    """Whether a test scene's trajectory is not new: in training, or a
+    repeat of an earlier test scene."""
+    return name in self.test_in_train or name in self.test_repeats
+
+
+def overlap(plans: Sequence[PlannedScene]) -> Overlap:
+  """The scenes a plan repeats. Without obstacles a scene is set by its
+  particle count alone, and counts map onto few sand boxes, so most such
+  scenes repeat (docs/dataset.md)."""
+  train = {scene_key(p.scene) for p in plans if p.split == "train"}
+  test_seen: set[str] = set()
+  in_train, repeats = [], []
+  for p in plans:
+    if p.split != "test":
+      continue
+    key = scene_key(p.scene)
+    if key in train:
+      in_train.append(p.scene.name)
+    elif key in test_seen:
+      repeats.append(p.scene.name)
+    test_seen.add(key)
+  return Overlap(len(train), len(test_seen), tuple(in_train), tuple(repeats))
+
+
 def group_of(scene_name: str) -> str:
   """The test group tag of a planned scene's name ('' for training)."""
   parts = scene_name.split("/")

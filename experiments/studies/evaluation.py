@@ -200,10 +200,30 @@ def per_trajectory_row(r: dict) -> dict:
   return row
 
 
+# The group of the test trajectories whose scene is new: in no training
+# scene and no earlier test scene (``mpm.dataset.overlap``).
+HELD_OUT = "held out"
+
+
+def mark_seen(rows: Sequence[dict], data_dir: str) -> None:
+  """Sets each row's ``seen`` (its scene is a training scene's or an
+  earlier test scene's, so its trajectory is not new) from the plan of the
+  dataset in ``data_dir``; leaves the rows alone if it has no plan."""
+  try:
+    spec = dataset_lib.load_spec(data_dir)
+  except mpm_io.FormatError:
+    return
+  overlap = dataset_lib.overlap(dataset_lib.plan(spec))
+  for row in rows:
+    row["seen"] = overlap.seen(row["name"])
+
+
 def group_summary(rows: Sequence[dict]) -> list[dict]:
-  """Per test group (and all): medians and maxima of the per-trajectory
-  rows."""
+  """Per test group (and all; and ``HELD_OUT`` when some rows are
+  ``seen``): medians and maxima of the per-trajectory rows."""
   groups: dict[str, list] = {"all": list(rows)}
+  if any(row.get("seen") for row in rows):
+    groups[HELD_OUT] = [row for row in rows if not row["seen"]]
   for row in rows:
     groups.setdefault(row["group"], []).append(row)
   out = []
@@ -338,6 +358,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   figures.final_deposits(results, os.path.join(out_dir,
                                                "final_deposits.png"))
   rows = [per_trajectory_row(r) for r in results]
+  mark_seen(rows, s.data)
   mpm_io.write_csv(os.path.join(out_dir, "trajectories.csv"), rows)
   groups = group_summary(rows)
   mpm_io.write_csv(os.path.join(out_dir, "groups.csv"), groups)
@@ -408,7 +429,10 @@ def report(summary: dict[str, Any]) -> str:
       "speed over the last 5 steps, GNS / MPM (median): a deposit that "
       "jitters instead of resting shows here. Kinetic energy: the sand's "
       f"over the last {REST_WINDOW_S:g} s, GNS over MPM (median and worst; "
-      "1 rests as the MPM does).", "",
+      "1 rests as the MPM does). "
+      f"'{HELD_OUT}': the trajectories whose scene is in no training scene "
+      "and no earlier test scene (without obstacles a scene is set by its "
+      "sand box alone, so such scenes repeat; docs/dataset.md).", "",
       "| group | n | mean MSE (m^2) | const. vel. | front error | deposit "
       "error (m) | inside | outside | free: inside | pushed/step | deepest "
       "push (m) | speed at end (cm/s) | kinetic energy ratio |",

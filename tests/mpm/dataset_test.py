@@ -389,6 +389,43 @@ class OtherSpecTest(absltest.TestCase):
                        a.scene)
 
 
+class OverlapTest(absltest.TestCase):
+
+  def test_overlap_equals_pairwise_comparison(self):
+    # The small config's plan, its first 200 training and 21 test scenes:
+    # every repeat found by comparing every pair of scene dicts.
+    spec = dataset.DatasetSpec(num_train=200, num_test=21, spacing=0.01)
+    plans = dataset.plan(spec)
+    found = dataset.overlap(plans)
+
+    def same(a, b):
+      da, db = a.scene.to_dict(), b.scene.to_dict()
+      da.pop("name")
+      db.pop("name")
+      return da == db
+    train = [p for p in plans if p.split == "train"]
+    test = [p for p in plans if p.split == "test"]
+    in_train = [t.scene.name for t in test
+                if any(same(t, p) for p in train)]
+    repeats = [t.scene.name for i, t in enumerate(test)
+               if t.scene.name not in in_train
+               and any(same(t, u) for u in test[:i])]
+    self.assertEqual(list(found.test_in_train), in_train)
+    self.assertEqual(list(found.test_repeats), repeats)
+    distinct = lambda ps: sum(not any(same(p, q) for q in ps[:i])
+                              for i, p in enumerate(ps))
+    self.assertEqual(found.distinct_train, distinct(train))
+    self.assertEqual(found.distinct_test, distinct(test))
+    # What it is there to show: scenes without obstacles repeat (their sand
+    # box is all that varies), scenes with obstacles do not.
+    self.assertNotEmpty(found.test_in_train)
+    for name in found.test_in_train + found.test_repeats:
+      self.assertEqual(dataset.group_of(name), "none")
+      self.assertTrue(found.seen(name))
+    self.assertLess(found.distinct_train, len(train))
+    self.assertFalse(found.seen(test[1].scene.name))
+
+
 class ExclusiveGenerationTest(absltest.TestCase):
 
   def test_a_second_generator_on_the_same_directory_fails(self):

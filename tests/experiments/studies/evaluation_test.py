@@ -148,6 +148,22 @@ class ScoreTest(absltest.TestCase):
     self.assertAlmostEqual(a["median_deposit_error"], 0.02)
     self.assertAlmostEqual(a["mean_pushed_fraction"], 0.2)
     self.assertNotIn("free_max_inside_solids", every)
+    self.assertNotIn(evaluation.HELD_OUT, groups)
+
+  def test_held_out_group_leaves_out_seen_scenes(self):
+    base = {"mean_mse_constant_velocity": 1.0, "front_error_relative": 0.1,
+            "deposit_error": 0.01, "max_inside_solids": 0.0,
+            "max_outside_domain": 0.0, "mean_pushed_fraction": 0.0,
+            "max_pushed_depth": 0.0, "final_speed": 0.0,
+            "mpm_final_speed": 0.0}
+    rows = [{**base, "group": "none", "mean_mse": 1.0, "seen": True},
+            {**base, "group": "none", "mean_mse": 2.0, "seen": False},
+            {**base, "group": "two", "mean_mse": 6.0, "seen": False}]
+    groups = {g["group"]: g for g in evaluation.group_summary(rows)}
+    held = groups[evaluation.HELD_OUT]
+    self.assertEqual(held["trajectories"], 2)
+    self.assertAlmostEqual(held["mean_mse"], 4.0)
+    self.assertEqual(groups["all"]["trajectories"], 3)
 
 
 class RolloutSplitTest(absltest.TestCase):
@@ -209,10 +225,13 @@ class RolloutSplitTest(absltest.TestCase):
                  "final_deposits.png"):
       self.assertTrue(os.path.exists(os.path.join(out, name)), name)
     # The same rollout as rollout_split's, without the unconstrained one.
+    # Marked as seen or not from the tiny dataset's plan: its first test
+    # scene (no obstacle) is in no training scene there.
     (row,) = summary["rows"]
     self.assertEqual(row, {
-        k: v for k, v in evaluation.per_trajectory_row(self.results[0]).items()
-        if not k.startswith("free_")})
+        **{k: v for k, v in
+           evaluation.per_trajectory_row(self.results[0]).items()
+           if not k.startswith("free_")}, "seen": False})
     with open(os.path.join(out, "report.md")) as f:
       self.assertEqual(f.read(), evaluation.report(summary))
     # The report needs nothing but the summary: the JSON written reads back.
