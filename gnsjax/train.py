@@ -113,14 +113,19 @@ class Trainer:
     noise_std = problem.noise_std
 
     outside = config.train.target_outside_solids
+    clean = config.train.clean_fraction
 
     def prepare(key, positions, moving, solids):
       keys = jax.random.split(key, positions.shape[0])
-      add = functools.partial(simulator.add_noise, noise_std=noise_std)
-      if not outside:
-        return jax.vmap(add)(keys, positions, moving)
-      return jax.vmap(lambda k, x, m, s: add(k, x, m, solids=s))(
-          keys, positions, moving, solids)
+      std = jnp.full((positions.shape[0],), noise_std, jnp.float32)
+      if clean:
+        # Windows left clean: sand exactly at rest, with its exact zero
+        # target, which noisy windows never show (docs/gns.md).
+        draw = jax.random.uniform(jax.random.fold_in(key, 1), std.shape)
+        std = jnp.where(draw < clean, 0.0, std)
+      add = lambda k, x, m, n, s: simulator.add_noise(k, x, m, n, solids=s)
+      return jax.vmap(add)(keys, positions, moving, std,
+                           solids if outside else None)
 
     def batch_loss(params, graphs: simulator.Graph, target):
       per_window = jax.vmap(

@@ -61,6 +61,9 @@ def get_config() -> ml_collections.ConfigDict:
   # Noisy targets pushed out of the solids (simulator.add_noise): the model
   # learns to step out of a solid instead of staying inside.
   config.train.target_outside_solids = False
+  # This fraction of the training windows gets no noise (drawn per window):
+  # the model also sees sand exactly at rest, whose target is exactly zero.
+  config.train.clean_fraction = 0.0
   # Gather training windows on the device from the whole split stored there
   # (batching.DeviceWindows) instead of reading them on the host; needs
   # model.boundary_particles = False.

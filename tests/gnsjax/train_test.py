@@ -417,6 +417,39 @@ class TargetOutsideSolidsTest(fixtures.TinyRunTestCase):
                                   out[False][1][~inside])
 
 
+class CleanFractionTest(fixtures.TinyRunTestCase):
+
+  def test_a_window_is_either_clean_or_noised_as_without_the_option(self):
+    out = {}
+    for fraction in (0.0, 0.5, 1.0):
+      config = fixtures.tiny_config(noise_std=3e-3, clean_fraction=fraction)
+      problem = run_lib.load_problem(self.data, config)
+      trainer = train.Trainer(config, problem)
+      with data.WindowDataset(data.split_path(self.data, "train"),
+                              input_frames=problem.input_frames,
+                              seed=0) as ds:
+        batch = trainer.make_batch([ds[k] for k in range(8)])
+      graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
+      out[fraction] = np.asarray(graphs.positions), np.asarray(target)
+    c = problem.input_frames
+    clean = batch.positions[:, -c - 1:-1], batch.positions[:, -1]
+    # All clean: the true frames, the true next frame.
+    np.testing.assert_array_equal(out[1.0][0], clean[0])
+    np.testing.assert_array_equal(out[1.0][1], clean[1])
+    self.assertGreater(np.abs(out[0.0][0] - clean[0]).max(), 1e-4)
+    # Half: each window is the clean one or the one without the option
+    # (the same noise), and both kinds occur.
+    kinds = []
+    for b in range(len(batch.positions)):
+      same_as = [np.array_equal(out[0.5][0][b], ref[0][b]) and
+                 np.array_equal(out[0.5][1][b], ref[1][b])
+                 for ref in (clean, out[0.0])]
+      self.assertEqual(sum(same_as), 1, f"window {b}")
+      kinds.append(same_as[0])
+    self.assertIn(True, kinds)
+    self.assertIn(False, kinds)
+
+
 class DataParallelTest(absltest.TestCase):
 
   def test_two_devices_match_one(self):
