@@ -394,11 +394,12 @@ def predicted_frame_indices(n_frames: int, input_frames: int,
 
 def trajectory_nodes(t: mpm_io.Trajectory, input_frames: int,
                      frame_stride: int = 1, boundary: bool = True,
-                     sdf_spacing: float = 0.005) -> SceneNodes:
-  """The start of a stored trajectory: its sand at frames 0, k, ...,
-  (C - 1) k, then (if ``boundary``) its boundary particles as static nodes,
-  and its scene's SDF grid at ``sdf_spacing`` (m)."""
-  sand = t.positions[input_frame_indices(input_frames, frame_stride)]
+                     sdf_spacing: float = 0.005, start: int = 0) -> SceneNodes:
+  """A window of a stored trajectory: its sand at frames s, s + k, ...,
+  s + (C - 1) k (s = ``start``), then (if ``boundary``) its boundary
+  particles as static nodes, and its scene's SDF grid at ``sdf_spacing``
+  (m)."""
+  sand = t.positions[start + input_frame_indices(input_frames, frame_stride)]
   n_sand = t.positions.shape[1]
   if boundary:
     fixed = np.broadcast_to(t.boundary_positions[None],
@@ -414,26 +415,29 @@ def trajectory_nodes(t: mpm_io.Trajectory, input_frames: int,
 
 def rollout_trajectory(model, params, t: mpm_io.Trajectory, problem,
                        n_steps: int | None = None,
-                       project: bool = True) -> Rollout:
-  """A stored trajectory rolled out from its start by a trained model.
+                       project: bool = True, start: int = 0) -> Rollout:
+  """A stored trajectory rolled out by a trained model from its start, or
+  from its frames ``start``, ``start`` + k, ... (``start`` = F - 1 - (C - 1)
+  k: from its last frames, the MPM's deposit).
 
   Args:
     model, params: the network and its parameters.
-    t: the trajectory (its first (C - 1) k + 1 frames are the inputs).
+    t: the trajectory (its (C - 1) k + 1 frames from ``start`` are the
+      inputs).
     problem: the run's ``gnsjax.run.Problem`` (stride, features, statistics).
     n_steps: learned steps (default: as many as the trajectory has frames
       for, ``predicted_frame_indices``).
     project: keep sand out of solids.
 
   Returns:
-    The sand's ``Rollout`` (boundary nodes removed); step t is stored frame
-    ``predicted_frame_indices(...)[t]``.
+    The sand's ``Rollout`` (boundary nodes removed); from the start, step t
+    is stored frame ``predicted_frame_indices(...)[t]``.
   """
   c, k = problem.input_frames, problem.frame_stride
   if n_steps is None:
-    n_steps = len(predicted_frame_indices(len(t.positions), c, k))
+    n_steps = len(predicted_frame_indices(len(t.positions) - start, c, k))
   scene = trajectory_nodes(t, c, k, problem.boundary_particles,
-                           problem.sdf_spacing)
+                           problem.sdf_spacing, start)
   out = rollout(simulator.ModelPredictor(model), params, scene, n_steps,
                 problem.context, problem.spec, project=project)
   return out._replace(positions=out.positions[:, :t.positions.shape[1]])

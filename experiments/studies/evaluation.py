@@ -110,16 +110,42 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
   }
 
 
+# Learned steps rolled out from the MPM's resting deposit (``hold_rest``).
+REST_HOLD_STEPS = 40
+
+
+def hold_rest(run: run_lib.Run, t: mpm_io.Trajectory, steps: int) -> dict:
+  """Does the learned simulator keep the MPM's deposit at rest? It starts
+  from the trajectory's last C frames (k apart) and takes ``steps`` learned
+  steps with the constraint. Rest without the error a whole rollout
+  carries: a model that fits rest keeps still sand still.
+
+  Returns ``held_speed``, the sand's mean speed over the last 5 steps
+  (m/s), and ``held_drift``, its mean displacement from the MPM's last
+  frame at the end (m).
+  """
+  p = run.problem
+  start = len(t.positions) - 1 - (p.input_frames - 1) * p.frame_stride
+  held = rollout_lib.rollout_trajectory(run.model, run.params, t, p, steps,
+                                        start=start).positions
+  held = np.concatenate([t.positions[-1:], held])
+  times = np.arange(steps + 1) * p.frame_stride * t.scene.frame_dt
+  drift = np.linalg.norm(held[-1] - held[0], axis=-1)
+  return {"held_speed": metrics.final_speed(held, times),
+          "held_drift": float(np.mean(drift))}
+
+
 def rollout_split(run: run_lib.Run, path: str,
                   max_trajectories: int | None = None,
-                  unconstrained: bool = True) -> list[dict]:
+                  unconstrained: bool = True,
+                  rest_steps: int = REST_HOLD_STEPS) -> list[dict]:
   """Rolls out every trajectory of a split from its first frames.
 
   Returns one dict per trajectory: its labels (``describe``), ``score``'s
-  metrics of the constrained rollout, and, if ``unconstrained``, the
-  fraction of sand inside solids and outside the domain of a rollout
-  without the solid constraint (``free_inside_solids``,
-  ``free_outside_domain``, ``free_mse``).
+  metrics of the constrained rollout, if ``rest_steps`` ``hold_rest``'s
+  figures, and, if ``unconstrained``, the fraction of sand inside solids and
+  outside the domain of a rollout without the solid constraint
+  (``free_inside_solids``, ``free_outside_domain``, ``free_mse``).
   """
   results = []
   problem = run.problem
@@ -135,6 +161,8 @@ def rollout_split(run: run_lib.Run, path: str,
     out = rollout_lib.rollout_trajectory(run.model, run.params, t, problem)
     r = {"index": i, "name": t.scene.name, **describe(t.scene),
          "trajectory": t, **score(t, out, frames, problem)}
+    if rest_steps:
+      r.update(hold_rest(run, t, rest_steps))
     if unconstrained:
       free = rollout_lib.rollout_trajectory(run.model, run.params, t, problem,
                                             project=False).positions
@@ -191,6 +219,8 @@ def per_trajectory_row(r: dict) -> dict:
       "mpm_final_speed": r["mpm_final_speed"],
       "kinetic_energy_ratio": r["kinetic_energy_ratio"],
   }
+  if "held_speed" in r:
+    row.update(held_speed=r["held_speed"], held_drift=r["held_drift"])
   if "free_inside_solids" in r:
     row.update(
         free_mean_mse=float(np.mean(r["free_mse"])),
@@ -249,6 +279,10 @@ def group_summary(rows: Sequence[dict]) -> list[dict]:
           col("kinetic_energy_ratio")))
       entry["max_kinetic_energy_ratio"] = float(np.max(
           col("kinetic_energy_ratio")))
+    if len(col("held_speed")):
+      entry["median_held_speed"] = float(np.median(col("held_speed")))
+      entry["max_held_speed"] = float(np.max(col("held_speed")))
+      entry["median_held_drift"] = float(np.median(col("held_drift")))
     if len(col("free_max_inside_solids")):
       entry["free_max_inside_solids"] = float(np.max(
           col("free_max_inside_solids")))
@@ -316,6 +350,10 @@ class Settings(settings.Base):
   unconstrained: bool = settings.field(
       True, "Also roll out without the solid constraint, to report how much "
       "sand the model alone puts inside solids.")
+  rest_steps: int = settings.field(
+      REST_HOLD_STEPS, "Learned steps rolled out from each trajectory's "
+      "last frames, the MPM's deposit, to score whether the model keeps it "
+      "at rest (0: skip).", lower=0)
   checkpoint_trajectories: int | None = settings.field(
       None, "Test trajectories per checkpoint for Fig. 5 (default: all "
       "evaluated).", lower=1)
@@ -342,14 +380,15 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
       "device": str(jax.devices()[0]),
       "frame_stride": trained.problem.frame_stride,
       "input_frames": trained.problem.input_frames,
-      "boundary_particles": trained.problem.boundary_particles}
+      "boundary_particles": trained.problem.boundary_particles,
+      "rest_steps": s.rest_steps}
 
   log = read_csv(os.path.join(s.workdir, "metrics.csv"))
   if log:
     figures.training_curves(log, out_dir)
 
   results = rollout_split(trained, test_path, s.max_trajectories,
-                          s.unconstrained)
+                          s.unconstrained, s.rest_steps)
   frame_dt = results[0]["trajectory"].scene.frame_dt
   curves = breakdown(results)
   figures.breakdown_curves(curves, results[0]["frames"] * frame_dt, out_dir)
@@ -380,7 +419,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
         else:
           res = rollout_split(run_lib.load_run(s.workdir, step), test_path,
                               s.checkpoint_trajectories or s.max_trajectories,
-                              unconstrained=False)
+                              unconstrained=False, rest_steps=0)
         errors[step] = float(np.mean([np.mean(r["mse"]) for r in res]))
     if errors:
       figures.checkpoint_errors(errors, os.path.join(out_dir,
@@ -406,6 +445,14 @@ def _free(row: dict, key: str) -> str:
   return f"{row[key]:.1%}" if key in row else "not run"
 
 
+def _held(group: dict) -> str:
+  """``hold_rest``'s medians, or "not run" (``--rest_steps=0``)."""
+  if "median_held_speed" not in group:
+    return "not run"
+  return (f"{100 * group['median_held_speed']:.2f} / "
+          f"{1e3 * group['median_held_drift']:.2f}")
+
+
 def report(summary: dict[str, Any]) -> str:
   """The Markdown report of an evaluation (``run``'s summary, or the
   ``summary.json`` it wrote)."""
@@ -429,14 +476,19 @@ def report(summary: dict[str, Any]) -> str:
       "speed over the last 5 steps, GNS / MPM (median): a deposit that "
       "jitters instead of resting shows here. Kinetic energy: the sand's "
       f"over the last {REST_WINDOW_S:g} s, GNS over MPM (median and worst; "
-      "1 rests as the MPM does). "
+      "1 rests as the MPM does). Held: the same model started from the "
+      f"MPM's last frames (its deposit) for {summary.get('rest_steps', 0)} "
+      "learned steps, the sand's "
+      "mean speed at the end and its mean drift (median; a model that fits "
+      "rest keeps still sand still). "
       f"'{HELD_OUT}': the trajectories whose scene is in no training scene "
       "and no earlier test scene (without obstacles a scene is set by its "
       "sand box alone, so such scenes repeat; docs/dataset.md).", "",
       "| group | n | mean MSE (m^2) | const. vel. | front error | deposit "
       "error (m) | inside | outside | free: inside | pushed/step | deepest "
-      "push (m) | speed at end (cm/s) | kinetic energy ratio |",
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+      "push (m) | speed at end (cm/s) | kinetic energy ratio | held: speed "
+      "(cm/s) / drift (mm) |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in summary["groups"]:
     lines.append(
         f"| {g['group']} | {g['trajectories']} | {g['mean_mse']:.2e} | "
@@ -449,7 +501,7 @@ def report(summary: dict[str, Any]) -> str:
         f"{100 * g['median_final_speed']:.1f} / "
         f"{100 * g['median_mpm_final_speed']:.1f} | "
         f"{_ratio(g.get('median_kinetic_energy_ratio'))} / "
-        f"{_ratio(g.get('max_kinetic_energy_ratio'))} |")
+        f"{_ratio(g.get('max_kinetic_energy_ratio'))} | {_held(g)} |")
   lines += [
       "", "## Test error by checkpoint (Fig. 5)", "",
       f"Over the first {summary['checkpoint_trajectories']} test "

@@ -135,6 +135,9 @@ class RolloutTest(absltest.TestCase):
     np.testing.assert_array_equal(
         scene.solids.values,
         geometry.scene_sdf_grid(t.scene, 0.02).values)
+    later = rollout.trajectory_nodes(t, C, 2, sdf_spacing=0.02, start=3)
+    np.testing.assert_array_equal(later.window[:, :n],
+                                  t.positions[3:3 + 2 * C:2])
     alone = rollout.trajectory_nodes(t, C, boundary=False)
     self.assertEqual(alone.window.shape, (C, n, 2))
     self.assertTrue(np.all(alone.moving))

@@ -14,6 +14,7 @@ from experiments.studies import evaluation
 from gnsjax import data
 from gnsjax import features
 from gnsjax import graph
+from gnsjax import metrics
 from gnsjax import rollout
 from gnsjax import run as run_lib
 from gnsjax import train
@@ -210,10 +211,21 @@ class RolloutSplitTest(absltest.TestCase):
       self.assertEqual(r["group"], evaluation.describe(t.scene)["group"])
     row = evaluation.per_trajectory_row(self.results[0])
     self.assertIn("free_mean_mse", row)
+    # Held at rest: the same model from the trajectory's last frames.
+    t = next(data.trajectories(self.path))
+    held = rollout.rollout_trajectory(self.trained.model, self.trained.params,
+                                      t, self.trained.problem, 40,
+                                      start=16 - 1 - 5 * 2).positions
+    path = np.concatenate([t.positions[-1:], held])
+    self.assertAlmostEqual(row["held_speed"], metrics.final_speed(
+        path, np.arange(41) * 2 * t.scene.frame_dt), places=6)
+    self.assertAlmostEqual(row["held_drift"], np.mean(np.linalg.norm(
+        held[-1] - t.positions[-1], axis=-1)), places=6)
     summary = evaluation.group_summary(
         [evaluation.per_trajectory_row(r) for r in self.results])[0]
     self.assertEqual(summary["trajectories"], 2)
     self.assertIn("free_max_inside_solids", summary)
+    self.assertIn("median_held_speed", summary)
 
   def test_run_writes_its_files_and_its_report_reads_the_summary(self):
     out = os.path.join(self._tmp.name, "evaluation")
