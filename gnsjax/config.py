@@ -26,7 +26,7 @@ CONFIG_KEYS = {
               "frame_stride", "noise_std", "noise_velocity_fraction",
               "fold_noise", "motion_weighting", "pushforward_steps",
               "pushforward_probability", "target_outside_solids",
-              "clean_fraction",
+              "clean_fraction", "clean_resting_only",
               "lr_init", "lr_min", "lr_decay_steps", "clip_norm", "node_bucket",
               "capacity_multiplier", "max_wall_time_s", "device_windows",
               "init_from"),

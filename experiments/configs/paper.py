@@ -64,6 +64,9 @@ def get_config() -> ml_collections.ConfigDict:
   # This fraction of the training windows gets no noise (drawn per window):
   # the model also sees sand exactly at rest, whose target is exactly zero.
   config.train.clean_fraction = 0.0
+  # ... only among windows whose sand rests (train.resting: mean speed below
+  # 0.1 mm per stored frame); the moving ones all keep their noise.
+  config.train.clean_resting_only = False
   # Gather training windows on the device from the whole split stored there
   # (batching.DeviceWindows) instead of reading them on the host; needs
   # model.boundary_particles = False.

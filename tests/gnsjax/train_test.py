@@ -417,21 +417,52 @@ class TargetOutsideSolidsTest(fixtures.TinyRunTestCase):
                                   out[False][1][~inside])
 
 
+
+class RestingTest(absltest.TestCase):
+
+  def test_resting_is_the_sands_mean_speed_below_the_bound(self):
+    c, n, stride = 6, 4, 3
+    still = np.zeros((c, n, 2), np.float32)
+    # The sand creeps at 0.9x and 1.1x the bound per stored frame; the
+    # padding node (not moving) flies, which must not count.
+    slow, fast = (np.zeros((c, n, 2), np.float32) for _ in range(2))
+    for w, factor in ((slow, 0.9), (fast, 1.1)):
+      w[:, :3, 0] = np.arange(c)[:, None] * stride * factor * (
+          train.RESTING_SPEED)
+    for w in (still, slow, fast):
+      w[:, 3, 1] = np.arange(c) * 1.0
+    moving = np.array([[True, True, True, False]] * 3)
+    got = train.resting(jnp.asarray(np.stack([still, slow, fast])),
+                        jnp.asarray(moving), stride)
+    np.testing.assert_array_equal(got, [True, True, False])
+
+
 class CleanFractionTest(fixtures.TinyRunTestCase):
+
+  def _batch_arrays(self, **options):
+    """(batch, (inputs, targets)) of eight tiny windows, 3 mm noise; the
+    sand of windows 2 and 5 is held still at its first frame (the tiny
+    data's sand always moves)."""
+    config = fixtures.tiny_config(noise_std=3e-3, **options)
+    problem = run_lib.load_problem(self.data, config)
+    trainer = train.Trainer(config, problem)
+    with data.WindowDataset(data.split_path(self.data, "train"),
+                            input_frames=problem.input_frames,
+                            seed=0) as ds:
+      windows = [ds[k] for k in range(8)]
+    for k in (2, 5):
+      x = windows[k].positions
+      windows[k] = windows[k]._replace(
+          positions=np.broadcast_to(x[:1], x.shape).copy())
+    batch = trainer.make_batch(windows)
+    graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
+    return batch, (np.asarray(graphs.positions), np.asarray(target))
 
   def test_a_window_is_either_clean_or_noised_as_without_the_option(self):
     out = {}
     for fraction in (0.0, 0.5, 1.0):
-      config = fixtures.tiny_config(noise_std=3e-3, clean_fraction=fraction)
-      problem = run_lib.load_problem(self.data, config)
-      trainer = train.Trainer(config, problem)
-      with data.WindowDataset(data.split_path(self.data, "train"),
-                              input_frames=problem.input_frames,
-                              seed=0) as ds:
-        batch = trainer.make_batch([ds[k] for k in range(8)])
-      graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
-      out[fraction] = np.asarray(graphs.positions), np.asarray(target)
-    c = problem.input_frames
+      batch, out[fraction] = self._batch_arrays(clean_fraction=fraction)
+    c = out[0.0][0].shape[1]
     clean = batch.positions[:, -c - 1:-1], batch.positions[:, -1]
     # All clean: the true frames, the true next frame.
     np.testing.assert_array_equal(out[1.0][0], clean[0])
@@ -449,8 +480,25 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
     self.assertIn(True, kinds)
     self.assertIn(False, kinds)
 
+  def test_only_resting_windows_are_left_clean_with_the_option(self):
+    batch, noisy = self._batch_arrays(clean_fraction=0.0)
+    _, out = self._batch_arrays(clean_fraction=1.0, clean_resting_only=True)
+    c = noisy[0].shape[1]
+    inputs = batch.positions[:, -c - 1:-1]
+    rest = np.asarray(train.resting(jnp.asarray(inputs),
+                                    jnp.asarray(batch.moving),
+                                    fixtures.tiny_config().train.frame_stride))
+    np.testing.assert_array_equal(rest, np.isin(np.arange(8), (2, 5)))
+    for b in range(len(rest)):
+      want = ((inputs[b], batch.positions[b, -1]) if rest[b] else
+              (noisy[0][b], noisy[1][b]))
+      np.testing.assert_array_equal(out[0][b], want[0])
+      np.testing.assert_array_equal(out[1][b], want[1])
+
 
 class DataParallelTest(absltest.TestCase):
+
+
 
   def test_two_devices_match_one(self):
     data = fixtures.tiny_dataset()
