@@ -2,6 +2,8 @@
 
   python -m experiments.average_runs --workdirs=RUN_A,RUN_B --weights=0.5,0.5 \\
       --out=DIR
+  python -m experiments.average_runs --workdirs=RUN@32000,RUN@36000,RUN@40000 \\
+      --out=DIR          # one run's kept checkpoints
 
 The runs must share architecture, data and statistics (a model and its
 fine-tunings); the result is a run directory like any other (evaluate it,
@@ -14,7 +16,9 @@ from experiments import runtime
 from gnsjax import averaging
 
 _WORKDIRS = flags.DEFINE_list("workdirs", None,
-                              "Two or more run directories or shipped models.")
+                              "Two or more run directories or shipped models (each at its "
+                              "latest checkpoint), or DIR@STEP for a kept "
+                              "checkpoint.")
 _WEIGHTS = flags.DEFINE_list(
     "weights", None, "One weight per run, >= 0, summing to 1 (default: "
     "equal).")
@@ -27,8 +31,9 @@ def main(argv):
     raise runtime.InputError(
         f"--workdirs={','.join(_WORKDIRS.value)}: {len(_WORKDIRS.value)} "
         "run(s); allowed: two or more run directories")
-  for workdir in _WORKDIRS.value:
-    runtime.existing_dir("workdirs", workdir, holding="checkpoints")
+  for source in _WORKDIRS.value:
+    runtime.existing_dir("workdirs", source.rpartition("@")[0] or source,
+                         holding="checkpoints")
   runtime.writable("out", _OUT.value)
   n = len(_WORKDIRS.value)
   try:

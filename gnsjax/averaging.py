@@ -8,7 +8,9 @@ model and its 6-step pushforward fine-tuning: 4.3e-3 m^2 over whole test
 rollouts against 6.4e-3 for either (``docs/gns.md``).
 
 ``average_params`` is the arithmetic; ``write_average`` makes a run
-directory of it that everything loading a run accepts (``load_run``,
+directory of it (its sources: run directories, each at its latest
+checkpoint, or ``DIR@STEP`` for one kept checkpoint, so that one run's late
+checkpoints average into one model) that everything loading a run accepts (``load_run``,
 evaluation, rollouts, ``config.train.init_from``, and resuming training,
 which continues the last run's optimiser). Its ``averaged.json`` names the
 sources and weights.
@@ -82,15 +84,32 @@ def average_params(params: Sequence[Any], weights: Sequence[float]) -> Any:
       *params)
 
 
+def parse_source(source: str) -> tuple[str, int | None]:
+  """``DIR`` -> (DIR, None: its latest checkpoint); ``DIR@STEP`` ->
+  (DIR, STEP), InputError unless STEP is a checkpoint kept in DIR."""
+  workdir, at, step = source.rpartition("@")
+  if not at:
+    return source, None
+  mngr = checkpoint.manager(workdir, every_steps=1)
+  kept = sorted(mngr.all_steps())
+  mngr.close()
+  if not step.isdigit() or int(step) not in kept:
+    raise InputError(f"{source}: no checkpoint {step!r} in {workdir}; "
+                     f"allowed: {', '.join(map(str, kept)) or 'none kept'}")
+  return workdir, int(step)
+
+
 def write_average(workdirs: Sequence[str], weights: Sequence[float],
                   out: str) -> run_lib.Run:
-  """Writes the weighted mean of the runs' latest parameters as a run.
+  """Writes the weighted mean of the runs' parameters as a run.
 
   Args:
-    workdirs: two or more run directories (or shipped models).
+    workdirs: two or more run directories (or shipped models), each at its
+      latest checkpoint, or ``DIR@STEP`` for its checkpoint of that step.
     weights: one per run, >= 0, summing to 1.
-    out: a new directory; its checkpoint has the last run's step, config,
-      statistics, optimiser state and graph sizes, with averaged parameters.
+    out: a new directory; its checkpoint has the last source's step,
+      config, statistics, optimiser state and graph sizes, with averaged
+      parameters.
 
   Returns:
     The averaged run, loaded back from ``out``.
@@ -105,13 +124,14 @@ def write_average(workdirs: Sequence[str], weights: Sequence[float],
   if os.path.isdir(os.path.join(out, "checkpoints")):
     raise InputError(f"{out} already holds checkpoints; choose a new "
                      "directory")
-  runs = [run_lib.load_run(w) for w in workdirs]
+  sources = [parse_source(w) for w in workdirs]
+  runs = [run_lib.load_run(w, step) for w, step in sources]
   check_compatible(runs, workdirs)
   params = average_params([r.params for r in runs], weights)
 
   # The last run's whole checkpoint, as stored (so resuming continues its
   # optimiser), with the averaged parameters in place of its own.
-  source = checkpoint.manager(workdirs[-1], every_steps=1)
+  source = checkpoint.manager(sources[-1][0], every_steps=1)
   step = runs[-1].step
   stored = source.restore(step, args=ocp.args.Composite(
       state=ocp.args.StandardRestore(), config=ocp.args.JsonRestore(),
@@ -121,7 +141,7 @@ def write_average(workdirs: Sequence[str], weights: Sequence[float],
   state = dict(stored["state"], params=jax.tree.map(np.asarray, params))
   os.makedirs(out, exist_ok=True)
   record = {"sources": [{"workdir": os.path.normpath(w), "step": r.step}
-                        for w, r in zip(workdirs, runs)],
+                        for (w, _), r in zip(sources, runs)],
             "weights": weights}
   mpm_io.write_json(os.path.join(out, RECORD), record)
   mngr = checkpoint.manager(out, every_steps=1)

@@ -16,6 +16,7 @@ with a CPU (``measure_small_model``; the tolerances and why:
 """
 
 import functools
+import hashlib
 from typing import Any, Callable
 
 import jax
@@ -159,6 +160,15 @@ def small_rollout(run, start, steps: int, window: np.ndarray | None = None
   return out.positions[:, np.asarray(start.moving)]
 
 
+def params_digest(params) -> str:
+  """A short SHA-256 of the parameters' values: which model a stored
+  rollout came from (a reference of another model is not compared)."""
+  h = hashlib.sha256()
+  for leaf in jax.tree.leaves(params):
+    h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())
+  return h.hexdigest()[:16]
+
+
 def gns_agreement_steps(steps: int) -> list[int]:
   return [min(GNS_EARLY_STEP, steps) - 1, steps - 1]
 
@@ -182,7 +192,7 @@ def measure_small_model(sizes: Sizes, log: Callable[[str], None],
   out = {"particles": scene.granular.num_particles, "steps": steps,
          "frame_stride": run.problem.frame_stride,
          "s_per_simulation": timed["median_s"], **timed,
-         "agreement": {"steps": at,
+         "agreement": {"steps": at, "model_digest": params_digest(run.params),
                        "window": encode(start.window),
                        "positions": encode(last[0][at])}}
   log(f"small model on its scene ({out['particles']} particles, {steps} "
@@ -201,7 +211,15 @@ def measure_small_model(sizes: Sizes, log: Callable[[str], None],
   ref = gpu_agreement.reference_part(reference, "gns")
   if ref is not None:
     r = ref["small_model"]["agreement"]
-    if r["steps"] == at:
+    ours = out["agreement"]["model_digest"]
+    if r.get("model_digest") != ours:
+      # The shipped model changed since the reference was taken: its
+      # rollout is another model's, and no figure is made of it.
+      out["agreement"]["reference"] = {
+          "skipped": f"the reference's rollout is of another model "
+                     f"({r.get('model_digest', 'unrecorded')} against "
+                     f"{ours}); take the CPU reference again"}
+    elif r["steps"] == at:
       # At the CPU's precision: an accelerator's default float32 matmul may
       # be TF32, which the twin's "default" row shows apart.
       with jax.default_matmul_precision("highest"):

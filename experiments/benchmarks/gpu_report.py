@@ -136,6 +136,10 @@ def _agreement_lines(title: str, a: dict) -> list[str]:
     c = _get(a, *key)
     if c is None:
       continue
+    if "skipped" in c:
+      lines.append(f"| {name} | - | - | - | - | - | not compared: "
+                   f"{c['skipped']} |")
+      continue
     if key == ("reference",) and title == "GNS":
       # Its precision is recorded since it was made "highest" (before:
       # the device's default).
@@ -330,4 +334,20 @@ def to_markdown(report: dict, reference: dict | None) -> str:
               f"under {TARGET_TRAINING_H:g} h: "
               + ("not an accelerator" if cpu else _met(st["target_met"]))
               + ".", ""]
+    t2 = t.get("second")
+    if t2:
+      rt2 = (rt or {}).get("second")
+      lines += [f"### The {t2['config']} config (batch {t2['batch_size']}, "
+                f"latent {t2['latent_size']}, "
+                f"{t2['num_message_passing_steps']} steps)", "",
+                f"| | steps/s | its {t2['own_num_steps']} steps (h) |",
+                "|---|---|---|",
+                f"| this device | {t2['steps_per_s']:.3g} | "
+                f"{t2['own_projected_h']:.3g} |"]
+      if rt2:
+        lines.append(f"| CPU reference | {rt2['steps_per_s']:.3g} | "
+                     f"{rt2['own_projected_h']:.3g} |")
+      lines += ["", "Measured the same way, on "
+                f"{t2['dataset']['trajectories']} generated trajectories of "
+                "its own kind.", ""]
   return "\n".join(lines)

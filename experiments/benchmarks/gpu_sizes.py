@@ -31,6 +31,9 @@ class Sizes:
     small_frames: frames of the small model's scene (its agreement and
       timing).
     train_config: config of the timed training.
+    second_train_config: a second config timed the same way ("" skips):
+      the small config, whose recipe searches (docs/gns.md) are what an
+      accelerator would shorten.
     train_trajectories: training trajectories generated for it, of
       ``train_frames`` frames.
     train_warmup: steps before the timed ones; train_steps: timed steps,
@@ -52,6 +55,7 @@ class Sizes:
   gns_repeats: int = 2
   small_frames: int = 600
   train_config: str = "paper"
+  second_train_config: str = "small"
   train_trajectories: int = 2
   train_frames: int = 600
   train_warmup: int = 50
@@ -75,7 +79,8 @@ QUICK = Sizes(frames=19, repeats=1, batch_sizes=(1, 2), batch_frames=3,
               batch_repeats=1, chunk_frames=2, max_batch=2, dataset_batch=2,
               dataset_frames=3, spacings=(0.005,), gns_config="test",
               gns_steps=2, gns_batch_sizes=(1, 2), gns_repeats=1,
-              small_frames=19, train_config="test", train_trajectories=1,
+              small_frames=19, train_config="test", second_train_config="test",
+              train_trajectories=1,
               train_frames=10, train_warmup=1, train_steps=2,
               train_log_every=1)
 

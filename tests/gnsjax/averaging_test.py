@@ -73,6 +73,31 @@ class WriteAverageTest(fixtures.TinyRunTestCase):
     train.train_and_evaluate(more, self.data, out)
     self.assertEqual(run_lib.load_run(out).step, 3)
 
+  def test_one_runs_kept_checkpoints_average(self):
+    # DIR@STEP: the mean of one run's own checkpoints, by hand.
+    run = os.path.join(self.dir, "kept")
+    config = fixtures.tiny_config(num_steps=3, lr_init=1e-2)
+    config.checkpoint.every_steps = 1
+    config.checkpoint.named_steps = (1, 2)
+    train.train_and_evaluate(config, self.data, run)
+    out = os.path.join(self.dir, "kept_soup")
+    got = averaging.write_average([f"{run}@1", f"{run}@2"], [0.5, 0.5], out)
+    one, two = run_lib.load_run(run, 1), run_lib.load_run(run, 2)
+    self.assertFalse(all(jax.tree.leaves(jax.tree.map(
+        np.array_equal, one.params, two.params))))
+    jax.tree.map(lambda g, a, b: np.testing.assert_allclose(
+        g, 0.5 * (np.asarray(a) + np.asarray(b)), rtol=1e-6, atol=1e-7),
+                 got.params, one.params, two.params)
+    self.assertEqual(got.step, 2)
+    with open(os.path.join(out, averaging.RECORD)) as f:
+      self.assertEqual([(s["workdir"], s["step"]) for s in
+                        json.load(f)["sources"]],
+                       [(os.path.normpath(run), 1), (os.path.normpath(run), 2)])
+    with self.assertRaisesRegex(mpm.InputError,
+                                r"no checkpoint '7'.*allowed: 1, 2, 3"):
+      averaging.write_average([f"{run}@7", run], [0.5, 0.5],
+                              os.path.join(self.dir, "bad"))
+
   def test_runs_that_do_not_fit_together_are_refused(self):
     other = os.path.join(self.dir, "other")
     config = fixtures.tiny_config(num_steps=1)

@@ -74,6 +74,24 @@ class HelpersTest(absltest.TestCase):
     self.assertEqual(float(p["decoder"]["dense_0"]["kernel"].sum()), 2)
     self.assertEqual(float(p["node_encoder"]["dense_1"]["kernel"].sum()), 2)
 
+  def test_params_digest_names_the_model(self):
+    a = {"w": np.arange(6, dtype=np.float32).reshape(2, 3),
+         "b": np.ones(3, np.float32)}
+    same = {k: v.copy() for k, v in a.items()}
+    self.assertEqual(gpu_gns.params_digest(a), gpu_gns.params_digest(same))
+    one_ulp = dict(a, b=np.nextafter(a["b"], np.float32(2)))
+    self.assertNotEqual(gpu_gns.params_digest(a),
+                        gpu_gns.params_digest(one_ulp))
+
+  def test_a_reference_of_another_model_is_not_compared(self):
+    from experiments.benchmarks import gpu_report
+    lines = gpu_report._agreement_lines(  # pylint: disable=protected-access
+        "GNS", {"reference": {"skipped": "another model (x against y)"}})
+    self.assertIn("| against the CPU reference | - | - "
+                  "| - | - | - | not compared: another model (x against y) |",
+                  lines)
+    self.assertNotIn("**no**", "\n".join(lines))
+
   def test_report_without_parts_is_refused(self):
     with self.assertRaisesRegex(FileNotFoundError, "no gpu_<part>_quick"):
       gpu_benchmark.write_report(fixtures.tempdir(self), True, quick=True)
@@ -108,8 +126,15 @@ class SmokeTest(absltest.TestCase):
     t = ref["parts"]["train"]
     self.assertLen(t["intervals"], 2)
     self.assertGreater(t["projected_h"]["1500000"], 0)
+    # The second config, timed the same way, projected to its own steps.
+    t2 = t["second"]
+    self.assertLen(t2["intervals"], 2)
+    self.assertAlmostEqual(t2["own_projected_h"],
+                           t2["own_num_steps"] / t2["steps_per_s"] / 3600)
     with open(os.path.join(d, "gpu_cpu_reference_quick.md")) as f:
-      self.assertIn("The GPU benchmark's programs on this CPU", f.read())
+      md = f.read()
+    self.assertIn("The GPU benchmark's programs on this CPU", md)
+    self.assertIn("### The test config", md)
 
 
 class StoppedPartTest(absltest.TestCase):
