@@ -1,7 +1,7 @@
 """Generates (or resumes, or verifies) a dataset of MPM trajectories.
 
   python -m experiments.generate_dataset --config=experiments/configs/paper.py \
-      --out=DIR [--workers=2] [--verify]
+      --out=DIR [--workers=2 | --batch=64] [--verify]
 
 Killed at any moment, the same command continues where it stopped. A
 directory holding a dataset (or the parts of one) of another config is
@@ -31,6 +31,10 @@ _OUT = flags.DEFINE_string("out", None, "Dataset directory.")
 _WORKERS = flags.DEFINE_integer("workers", None,
                                 "Processes (default: the config's).",
                                 lower_bound=1)
+_BATCH = flags.DEFINE_integer(
+    "batch", 1, "Scenes per vmapped call, in one process (for an "
+    "accelerator; needs --workers=1); within 1e-6 m of one at a time.",
+    lower_bound=1)
 _VERIFY = flags.DEFINE_bool("verify", False,
                             "Check an existing dataset instead of generating.")
 _SHARD = flags.DEFINE_string(
@@ -61,8 +65,16 @@ def main(argv):
                              "allowed: one of them")
   shard = None if _SHARD.value is None else dataset.Shard.parse(_SHARD.value)
   workers = _WORKERS.value or _CONFIG.value.workers
+  if _BATCH.value > 1:
+    if _WORKERS.value not in (None, 1):
+      raise runtime.InputError(f"--batch={_BATCH.value} with --workers="
+                               f"{_WORKERS.value}; allowed: --batch > 1 only "
+                               "with --workers=1 (one process drives the "
+                               "batches)")
+    workers = 1
   if not _ASSEMBLE.value:
-    _check_budget(spec, workers, shard)
+    _check_budget(spec, max(workers, _BATCH.value), shard,
+                  "--batch" if _BATCH.value > 1 else "--workers")
   runtime.writable("out", _OUT.value)
   dataset.check_target(spec, _OUT.value)
   if _ASSEMBLE.value:
@@ -80,7 +92,7 @@ def main(argv):
         bar.set_postfix(last_s=f"{wall:.2f}")
     metadata = dataset.generate(spec, _OUT.value, workers=workers,
                                 progress=progress, compilation_cache=cache,
-                                shard=shard)
+                                shard=shard, batch=_BATCH.value)
   if "shard" in metadata:
     print(f"{_OUT.value}: shard {metadata['shard']} done "
           f"({metadata['parts']} trajectories); once every shard is done, "
@@ -89,9 +101,9 @@ def main(argv):
   _report(metadata)
 
 
-def _check_budget(spec, workers, shard):
+def _check_budget(spec, workers, shard, scenes_flag):
   """Refuses a dataset whose largest scene cannot fit this machine's memory
-  once per worker, or whose files cannot fit the disk; warns, with the
+  once per worker (or per scene of a batch), or whose files cannot fit the disk; warns, with the
   estimate, if it takes hours."""
   largest = max(sampler.PARTICLE_RANGE + dataset.TEST_PARTICLES)
   scene = sampler.sample_scene(0, num_particles=spec.particles(largest),
@@ -103,7 +115,7 @@ def _check_budget(spec, workers, shard):
   workers = min(workers, count)
   cost = budget.check_fits(scene, scenes=workers, names={
       "spacing": "dataset.spacing", "dx": None,
-      "num_frames": "dataset.num_frames", "scenes": "--workers"})
+      "num_frames": "dataset.num_frames", "scenes": scenes_flag})
   disk = count * spec.num_frames * cost.particles * 8  # float32 x, y
   parent = runtime.existing_ancestor(_OUT.value)
   free = shutil.disk_usage(parent).free

@@ -204,7 +204,10 @@ def group_of(scene_name: str) -> str:
 
 def _simulate_part(item: PlannedScene, parts_dir: str) -> float:
   """Simulates one planned scene and writes its part file atomically."""
-  result = simulation.simulate(item.scene)
+  return _write_part(item, simulation.simulate(item.scene), parts_dir)
+
+
+def _write_part(item: PlannedScene, result, parts_dir: str) -> float:
   trajectory = mpm_io.Trajectory.from_result(result, item.seed)
   mpm_io.write_trajectories(os.path.join(parts_dir, item.part_name),
                             [trajectory])
@@ -320,11 +323,14 @@ class Shard:
 def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
              progress: Callable[[int, int, float], None] | None = None,
              compilation_cache: str | None = None,
-             shard: Shard | None = None) -> dict:
+             shard: Shard | None = None, batch: int = 1) -> dict:
   """Generates (or finishes) the dataset in ``out_dir``.
 
   Args:
     workers: processes simulating in parallel (1: in this process).
+    batch: scenes per vmapped call in this process (``simulate_batch``,
+      for an accelerator; with workers = 1). Its trajectories agree with
+      one-at-a-time ones within 1e-6 m, not bit for bit.
     compilation_cache: persistent compilation cache for worker processes.
     progress: called as progress(done, total, wall_time_s) after each
       trajectory (also for parts found finished from an earlier run).
@@ -342,18 +348,23 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
     workers_lib.GeneratorBusyError: another generator is running on ``out_dir`` (for
       a shard: one that is not sharded, or on the same shard).
   """
+  if batch < 1 or (batch > 1 and workers > 1):
+    raise scene_lib.InputError(
+        f"batch={batch} with workers={workers}; allowed: batch >= 1, and "
+        "batch > 1 only with workers = 1 (one process drives the batches)")
   check_target(spec, out_dir)
   meta_path = os.path.join(out_dir, "metadata.json")
   if os.path.exists(meta_path):
     return mpm_io.read_json(meta_path)
   os.makedirs(out_dir, exist_ok=True)
   if shard is not None:
-    return _generate_shard(spec, out_dir, workers, progress,
+    return _generate_shard(spec, out_dir, (workers, batch), progress,
                            compilation_cache, shard)
   with _exclusive(out_dir):
     if os.path.exists(meta_path):  # finished before we took the lock
       return mpm_io.read_json(meta_path)
-    return _generate(spec, out_dir, workers, progress, compilation_cache)
+    return _generate(spec, out_dir, (workers, batch), progress,
+                     compilation_cache)
 
 
 def _write_spec_once(spec: DatasetSpec, parts_dir: str) -> None:
@@ -374,8 +385,18 @@ def _write_spec_once(spec: DatasetSpec, parts_dir: str) -> None:
 
 
 def _simulate_all(todo, parts_dir, workers, compilation_cache, on_done):
-  """Simulates the planned scenes ``todo`` into parts, in this process or
-  ``workers`` worker processes, calling ``on_done(wall)`` after each."""
+  """Simulates the planned scenes ``todo`` into parts, calling
+  ``on_done(wall)`` after each: ``workers`` = (processes, batch), in
+  ``processes`` worker processes or this one, in vmapped batches if
+  ``batch`` > 1."""
+  workers, batch = workers
+  if batch > 1:
+    for i in range(0, len(todo), batch):
+      chunk = todo[i:i + batch]
+      results = simulation.simulate_batch([it.scene for it in chunk])
+      for item, result in zip(chunk, results):
+        on_done(_write_part(item, result, parts_dir))
+    return
   if workers <= 1 or len(todo) <= 1:
     for it in todo:
       on_done(_simulate_part(it, parts_dir))

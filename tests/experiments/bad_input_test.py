@@ -319,6 +319,13 @@ ROWS = (
     ("generate_too_many_workers", "experiments.generate_dataset",
      [TEST, "--config.dataset.num_train=100000", "--workers=100000",
       "--out={d}/out"], "allowed: what fits, e.g. --workers <= "),
+    ("generate_batch_too_large", "experiments.generate_dataset",
+     [TEST, "--config.dataset.num_train=100000", "--batch=100000",
+      "--out={d}/out"], "allowed: what fits, e.g. --batch <= "),
+    ("generate_batch_with_workers", "experiments.generate_dataset",
+     [TEST, "--batch=4", "--workers=2", "--out={d}/out"],
+     "--batch=4 with --workers=2; allowed: --batch > 1 only with "
+     "--workers=1"),
     ("generate_too_large_for_the_disk", "experiments.generate_dataset",
      [TEST, "--config.dataset.num_train=1000000000", "--out={d}/out"],
      "dataset: 1,000,000,007 trajectories of 20 frames and up to 375 "
