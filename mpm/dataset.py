@@ -208,9 +208,8 @@ def _simulate_part(item: PlannedScene, parts_dir: str) -> float:
 
 
 def _write_part(item: PlannedScene, result, parts_dir: str) -> float:
-  trajectory = mpm_io.Trajectory.from_result(result, item.seed)
   mpm_io.write_trajectories(os.path.join(parts_dir, item.part_name),
-                            [trajectory])
+                            [mpm_io.Trajectory.from_result(result, item.seed)])
   return result.wall_time_s
 
 
@@ -328,9 +327,8 @@ def generate(spec: DatasetSpec, out_dir: str, *, workers: int = 2,
 
   Args:
     workers: processes simulating in parallel (1: in this process).
-    batch: scenes per vmapped call in this process (``simulate_batch``,
-      for an accelerator; with workers = 1). Its trajectories agree with
-      one-at-a-time ones within 1e-6 m, not bit for bit.
+    batch: scenes per vmapped call (``simulate_batch``; workers = 1): for
+      an accelerator; within 1e-6 m of one at a time, not bit for bit.
     compilation_cache: persistent compilation cache for worker processes.
     progress: called as progress(done, total, wall_time_s) after each
       trajectory (also for parts found finished from an earlier run).
@@ -385,10 +383,8 @@ def _write_spec_once(spec: DatasetSpec, parts_dir: str) -> None:
 
 
 def _simulate_all(todo, parts_dir, workers, compilation_cache, on_done):
-  """Simulates the planned scenes ``todo`` into parts, calling
-  ``on_done(wall)`` after each: ``workers`` = (processes, batch), in
-  ``processes`` worker processes or this one, in vmapped batches if
-  ``batch`` > 1."""
+  """Simulates ``todo`` into parts, calling ``on_done(wall)`` after each:
+  workers = (processes, batch), vmapped batches in this process if batch > 1."""
   workers, batch = workers
   if batch > 1:
     for i in range(0, len(todo), batch):
