@@ -15,10 +15,9 @@ from absl import flags
 from experiments import runtime
 from gnsjax import averaging
 
-_WORKDIRS = flags.DEFINE_list("workdirs", None,
-                              "Two or more run directories or shipped models (each at its "
-                              "latest checkpoint), or DIR@STEP for a kept "
-                              "checkpoint.")
+_WORKDIRS = flags.DEFINE_list(
+    "workdirs", None, "Two or more run directories or shipped models (each "
+    "at its latest checkpoint), or DIR@STEP for a kept checkpoint.")
 _WEIGHTS = flags.DEFINE_list(
     "weights", None, "One weight per run, >= 0, summing to 1 (default: "
     "equal).")
@@ -32,7 +31,7 @@ def main(argv):
         f"--workdirs={','.join(_WORKDIRS.value)}: {len(_WORKDIRS.value)} "
         "run(s); allowed: two or more run directories")
   for source in _WORKDIRS.value:
-    runtime.existing_dir("workdirs", source.rpartition("@")[0] or source,
+    runtime.existing_dir("workdirs", averaging.source_workdir(source),
                          holding="checkpoints")
   runtime.writable("out", _OUT.value)
   n = len(_WORKDIRS.value)

@@ -103,8 +103,9 @@ def main(argv):
 
 def _check_budget(spec, workers, shard, scenes_flag):
   """Refuses a dataset whose largest scene cannot fit this machine's memory
-  once per worker (or per scene of a batch), or whose files cannot fit the disk; warns, with the
-  estimate, if it takes hours."""
+  once per worker (or per scene of a batch: ``scenes_flag`` names which),
+  or whose files cannot fit the disk; warns, with the estimate, if it
+  takes hours."""
   largest = max(sampler.PARTICLE_RANGE + dataset.TEST_PARTICLES)
   scene = sampler.sample_scene(0, num_particles=spec.particles(largest),
                                num_frames=spec.num_frames,

@@ -9,11 +9,11 @@ rollouts against 6.4e-3 for either (``docs/gns.md``).
 
 ``average_params`` is the arithmetic; ``write_average`` makes a run
 directory of it (its sources: run directories, each at its latest
-checkpoint, or ``DIR@STEP`` for one kept checkpoint, so that one run's late
-checkpoints average into one model) that everything loading a run accepts (``load_run``,
-evaluation, rollouts, ``config.train.init_from``, and resuming training,
-which continues the last run's optimiser). Its ``averaged.json`` names the
-sources and weights.
+checkpoint, or ``DIR@STEP`` for one kept checkpoint, so that one run's
+late checkpoints average into one model) that everything loading a run
+accepts (``load_run``, evaluation, rollouts, ``config.train.init_from``,
+and resuming training, which continues the last run's optimiser). Its
+``averaged.json`` names the sources and weights.
 """
 
 import math
@@ -84,11 +84,16 @@ def average_params(params: Sequence[Any], weights: Sequence[float]) -> Any:
       *params)
 
 
+def source_workdir(source: str) -> str:
+  """The run directory of a source: ``DIR`` or ``DIR@STEP`` -> DIR."""
+  return source.rpartition("@")[0] or source
+
+
 def parse_source(source: str) -> tuple[str, int | None]:
   """``DIR`` -> (DIR, None: its latest checkpoint); ``DIR@STEP`` ->
   (DIR, STEP), InputError unless STEP is a checkpoint kept in DIR."""
-  workdir, at, step = source.rpartition("@")
-  if not at:
+  workdir, step = source_workdir(source), source.rpartition("@")[2]
+  if workdir == source:
     return source, None
   mngr = checkpoint.manager(workdir, every_steps=1)
   kept = sorted(mngr.all_steps())

@@ -382,10 +382,10 @@ def _write_spec_once(spec: DatasetSpec, parts_dir: str) -> None:
   check_target(spec, os.path.dirname(parts_dir))
 
 
-def _simulate_all(todo, parts_dir, workers, compilation_cache, on_done):
-  """Simulates ``todo`` into parts, calling ``on_done(wall)`` after each:
-  workers = (processes, batch), vmapped batches in this process if batch > 1."""
-  workers, batch = workers
+def _simulate_all(todo, parts_dir, parallel, compilation_cache, on_done):
+  """Simulates ``todo`` into parts, ``on_done(wall)`` after each; parallel
+  = (processes, batch): vmapped batches in this process if batch > 1."""
+  workers, batch = parallel
   if batch > 1:
     for i in range(0, len(todo), batch):
       chunk = todo[i:i + batch]
@@ -402,17 +402,17 @@ def _simulate_all(todo, parts_dir, workers, compilation_cache, on_done):
       compilation_cache, on_done)
 
 
-def _generate(spec, out_dir, workers, progress, compilation_cache) -> dict:
+def _generate(spec, out_dir, parallel, progress, compilation_cache) -> dict:
   parts_dir = os.path.join(out_dir, "parts")
   os.makedirs(parts_dir, exist_ok=True)
   workers_lib.remove_stale_temps(parts_dir)
   items = plan(spec)
-  _simulate_items(spec, items, parts_dir, workers, progress,
+  _simulate_items(spec, items, parts_dir, parallel, progress,
                   compilation_cache)
   return assemble(spec, out_dir, items)
 
 
-def _simulate_items(spec, items, parts_dir, workers, progress,
+def _simulate_items(spec, items, parts_dir, parallel, progress,
                     compilation_cache) -> None:
   # Checked before spec.json is written: parts of another config (say, from
   # a version that kept no spec.json) are refused, not adopted.
@@ -428,10 +428,10 @@ def _simulate_items(spec, items, parts_dir, workers, progress,
     if progress is not None:
       progress(done, len(items), wall)
 
-  _simulate_all(todo, parts_dir, workers, compilation_cache, on_done)
+  _simulate_all(todo, parts_dir, parallel, compilation_cache, on_done)
 
 
-def _generate_shard(spec, out_dir, workers, progress, compilation_cache,
+def _generate_shard(spec, out_dir, parallel, progress, compilation_cache,
                     shard: Shard) -> dict:
   # Shards share the directory (a shared lock: an unsharded generator or an
   # assembly waits for all of them) and each holds its own share.
@@ -447,7 +447,7 @@ def _generate_shard(spec, out_dir, workers, progress, compilation_cache,
                  "and rerun"):
       workers_lib.remove_stale_temps(parts_dir)
       items = shard.take(plan(spec))
-      _simulate_items(spec, items, parts_dir, workers, progress,
+      _simulate_items(spec, items, parts_dir, parallel, progress,
                       compilation_cache)
   return {"shard": str(shard), "parts": len(items)}
 
