@@ -7,7 +7,7 @@
 # sent with the ignored .whl/ carried (`make wheels` here first), and with
 # runs/NAME carried too when it holds a checkpoint to resume from an
 # earlier lease. On a bare machine it
-#   1. installs the wheels into /tmp/site (as experiments/benchmarks/gpu.sh);
+#   1. installs the wheels into /tmp/site (experiments/device_env.sh);
 #   2. generates the small config's dataset (1000 training and 100 test
 #      trajectories) into data/small1000 unless one is there, in vmapped
 #      batches of GEN_BATCH scenes (default all 1,100: a few compiled
@@ -39,10 +39,7 @@ data=data/small1000
 config=experiments/configs/small.py
 mkdir -p "$out"
 log="$out/${name}.log"
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir \
-  --upgrade --target /tmp/site .whl/*.whl || exit 1
-export PYTHONPATH="/tmp/site:$PWD:${PYTHONPATH:-}"
-export JAX_COMPILATION_CACHE_DIR="$PWD/.jax_cache/gpu"
+source experiments/device_env.sh
 { nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
   python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
 } > "$log" 2>&1

@@ -22,12 +22,8 @@ set -u
 parts=${1:-mpm,gns,train}
 limits=${GPU_PART_LIMITS_S:-mpm=160 gns=250 train=120}
 out=${OUT:-out/gpu_results}
-site=/tmp/site
 mkdir -p "$out" out/gpu
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir \
-  --upgrade --target "$site" .whl/*.whl || exit 1
-export PYTHONPATH="$site:$PWD:${PYTHONPATH:-}"
-export JAX_COMPILATION_CACHE_DIR="$PWD/.jax_cache/gpu"
+source experiments/device_env.sh
 log="$out/gpu_${parts//,/_}.log"
 { nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv
   python3 -c "import jax, flax; print('jax', jax.__version__, 'flax',
