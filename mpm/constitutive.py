@@ -29,8 +29,11 @@ All functions act per particle on leading batch dimensions. Units: Pa for
 moduli and stress, radians for angles.
 """
 
+import math
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from mpm import _pytree
 from mpm import linalg
@@ -167,18 +170,142 @@ class MuI:
     I_0: [] inertial number at which mu is halfway.
     grain_diameter: [] d (m).
     grain_density: [] rho_s (kg/m^3).
+    I_N, alpha_reg: [] the regularisation's threshold (the lower end of the
+      range where the plain law is well-posed, ``regularization_threshold``)
+      and exponent; None for the plain law (a change of program structure).
   """
   mu_s: jax.Array
   mu_2: jax.Array
   I_0: jax.Array  # pylint: disable=invalid-name
   grain_diameter: jax.Array
   grain_density: jax.Array
+  # Barker & Gray (2017)'s partial regularisation, or None for the plain
+  # law: below I_N, mu = sqrt(alpha_reg / ln(A / I)) (``mu_regularized``).
+  I_N: jax.Array | None = None  # pylint: disable=invalid-name
+  alpha_reg: jax.Array | None = None
 
 
 def mu_of_i(inertial_number, rheology: MuI):
   """mu(I) = mu_s + (mu_2 - mu_s) I / (I_0 + I)."""
   return rheology.mu_s + (rheology.mu_2 - rheology.mu_s) * (
       inertial_number / (rheology.I_0 + inertial_number))
+
+
+def _regularization_log_a(rheology: MuI):
+  """ln A of the regularised branch, A = I_N exp(alpha_reg / mu(I_N)^2), so
+  that mu is continuous at I_N (Barker & Gray 2017, eq. 6.4)."""
+  return (jnp.log(rheology.I_N) +
+          rheology.alpha_reg / mu_of_i(rheology.I_N, rheology)**2)
+
+
+def mu_regularized(inertial_number, rheology: MuI):
+  """Barker & Gray (2017)'s partially regularised law: mu(I) for I >= I_N,
+  sqrt(alpha_reg / ln(A / I)) below, which tends to 0 as I -> 0 (no yield
+  stress: sand below mu_s creeps, at a rate exponentially small in
+  1 / mu^2)."""
+  i = jnp.maximum(inertial_number, 1e-30)
+  low = jnp.sqrt(rheology.alpha_reg /
+                 (_regularization_log_a(rheology) - jnp.log(i)))
+  return jnp.where(i >= rheology.I_N, mu_of_i(i, rheology), low)
+
+
+def ill_posedness(inertial_number, mu, dmu_di):
+  """Barker & Gray (2017, eq. 3.9)'s C = 4 nu^2 - 4 nu + mu^2 (1 - nu/2)^2,
+  nu = I mu'(I) / mu, of the incompressible mu(I) equations in 2D: they are
+  ill-posed (short waves grow without bound, so a numerical answer depends on
+  the grid) where C > 0. numpy or jax arrays."""
+  nu = inertial_number * dmu_di / mu
+  return 4 * nu**2 - 4 * nu + mu**2 * (1 - nu / 2)**2
+
+
+def _plain_ill_posedness(i, mu_s, mu_2, i_0):
+  mu = mu_s + (mu_2 - mu_s) * i / (i_0 + i)
+  return ill_posedness(i, mu, (mu_2 - mu_s) * i_0 / (i_0 + i)**2)
+
+
+def regularization_threshold(mu_s: float, mu_2: float,
+                             i_0: float) -> float | None:
+  """I_N: the lowest inertial number at which the plain mu(I) law is
+  well-posed (``ill_posedness`` <= 0; float64, host side), or None where it
+  is ill-posed at every I in [1e-9, 100] (for mu_2 - mu_s = 0.26 and
+  I_0 = 0.279: every mu_s above 0.52, the paper's sand among them)."""
+  grid = np.logspace(-9, 2, 2201)
+  ok = np.flatnonzero(_plain_ill_posedness(grid, mu_s, mu_2, i_0) <= 0)
+  if not ok.size:
+    return None
+  if ok[0] == 0:
+    return float(grid[0])
+  lo, hi = grid[ok[0] - 1], grid[ok[0]]
+  for _ in range(60):
+    mid = math.sqrt(lo * hi)
+    if _plain_ill_posedness(mid, mu_s, mu_2, i_0) <= 0:
+      hi = mid
+    else:
+      lo = mid
+  return float(hi)
+
+
+def _quadratic_drop(tau_trial, p, c, rheology: MuI, yielding):
+  """The plain law's return: the drop y = tau_trial - tau of a yielding
+  state, the positive root of the quadratic of ``project_mu_i``."""
+  # Safe values where it does not yield keep both branches' gradients
+  # finite.
+  p = jnp.where(yielding, p, 1.0)
+  c = jnp.where(yielding, c, 1.0)
+  s = jnp.where(yielding, tau_trial - rheology.mu_s * p, 1.0)
+  b = rheology.I_0 + c * ((rheology.mu_2 - rheology.mu_s) * p - s)
+  root = jnp.sqrt(b * b + 4 * c * s * rheology.I_0)
+  # The positive root, each form free of cancellation on its side.
+  return jnp.where(b >= 0, 2 * s * rheology.I_0 / (b + root),
+                   (root - b) / (2 * c))
+
+
+# Newton steps of the regularised return: monotone from below (see
+# ``_regularized_drop``); 8 reach float32's precision over I from 1e-30 to
+# I_N (7: 3e-5 of tau_trial; tests/mpm/constitutive_test.py); one more
+# carries the gradient.
+_REGULARIZED_NEWTON_STEPS = 8
+# w = ln(A / I) beyond which the plastic rate is negligible (I < A e^-80).
+_W_MAX = 80.0
+
+
+def _regularized_drop(tau_trial, p, c, rheology: MuI, low):
+  """The regularised branch's return (I < I_N): the drop y with
+  tau_trial - y = p sqrt(alpha / w), w = ln(A / I), I = c y.
+
+  In w the condition reads r(w) = T - (A / (c p)) e^-w - sqrt(alpha / w)
+  = 0 with T = tau_trial / p: r increases and is concave, so Newton from
+  w0 = max(w_N, alpha / T^2) <= w* climbs to the root without overshooting.
+  The iterations carry no gradient; one last step with live parameters
+  carries the implicit function's.
+  """
+  p = jnp.where(low, p, 1.0)
+  c = jnp.where(low, c, 1.0)
+  # Elsewhere a ratio inside the branch (below mu(I_N)) keeps the unused
+  # iterations finite, and so the gradients of the used ones.
+  ratio = jnp.where(low, tau_trial / p,
+                    0.5 * mu_of_i(rheology.I_N, rheology))
+  alpha = rheology.alpha_reg
+  log_a = _regularization_log_a(rheology)
+  log_scale = log_a - jnp.log(c * p)          # ln(A / (c p))
+  w_n = log_a - jnp.log(rheology.I_N)
+
+  def residual(w, ratio, log_scale, alpha):
+    """r(w) and r'(w)."""
+    fall, mu_w = jnp.exp(log_scale - w), jnp.sqrt(alpha / w)
+    return ratio - fall - mu_w, fall + 0.5 * mu_w / w
+
+  stopped = jax.lax.stop_gradient((ratio, log_scale, alpha))
+  w_n = jax.lax.stop_gradient(w_n)
+  w = jnp.minimum(jnp.maximum(stopped[2] / stopped[0]**2, w_n), _W_MAX)
+  for _ in range(_REGULARIZED_NEWTON_STEPS):
+    r, dr = residual(w, *stopped)
+    # The root lies at w >= w_N (I <= I_N); rounding may not step past it.
+    w = jnp.maximum(w - r / dr, w_n)
+  w = jax.lax.stop_gradient(w)
+  r, dr = residual(w, ratio, log_scale, alpha)
+  w = w - r / dr
+  return jnp.exp(log_a - w) / c
 
 
 def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
@@ -200,6 +327,10 @@ def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
   Drucker-Prager return at alpha = mu_s / sqrt(2) (``project``).
   Separation (tr eps + v_c >= 0) is handled as there.
 
+  With the regularisation (``rheology.I_N`` set) every compressed state
+  with shear yields: where the return lands at I >= I_N it is the
+  quadratic's, below it ``_regularized_drop``'s (a few Newton steps).
+
   Args:
     F, volume_correction, mu, lam: as ``project``.
     rheology: the parameters; dt: the substep (s).
@@ -213,18 +344,23 @@ def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
   p = -(mu + lam) * trace_c
   tau_trial = _SQRT2 * mu * dev_norm
   # Separating sand (p <= 0) is _return_map's; only compressed sand yields.
-  yielding = jnp.logical_and(trace_c < 0, tau_trial > rheology.mu_s * p)
-  # Safe values where it does not yield keep both branches' gradients
-  # finite.
-  p = jnp.where(yielding, p, 1.0)
-  s = jnp.where(yielding, tau_trial - rheology.mu_s * p, 1.0)
+  compressed = trace_c < 0
+  p_safe = jnp.where(compressed, p, 1.0)
   c = rheology.grain_diameter / (
-      mu * dt * jnp.sqrt(p / rheology.grain_density))
-  b = rheology.I_0 + c * ((rheology.mu_2 - rheology.mu_s) * p - s)
-  root = jnp.sqrt(b * b + 4 * c * s * rheology.I_0)
-  # The positive root, each form free of cancellation on its side.
-  drop = jnp.where(b >= 0, 2 * s * rheology.I_0 / (b + root),
-                   (root - b) / (2 * c))
+      mu * dt * jnp.sqrt(p_safe / rheology.grain_density))
+  if rheology.I_N is None:
+    yielding = jnp.logical_and(compressed, tau_trial > rheology.mu_s * p)
+    drop = _quadratic_drop(tau_trial, p, c, rheology, yielding)
+  else:
+    # The return lands at I >= I_N iff the plain law's residual at I_N,
+    # tau_trial - I_N / c - mu(I_N) p, is >= 0 (it decreases in I).
+    upper = jnp.logical_and(compressed, tau_trial - rheology.I_N / c >=
+                            mu_of_i(rheology.I_N, rheology) * p_safe)
+    low = (compressed & ~upper &
+           (tau_trial**2 * _W_MAX > rheology.alpha_reg * p_safe**2))
+    yielding = upper | low
+    drop = jnp.where(upper, _quadratic_drop(tau_trial, p, c, rheology, upper),
+                     _regularized_drop(tau_trial, p, c, rheology, low))
   delta_gamma = jnp.where(yielding, drop / (_SQRT2 * mu), 0.0)
   return _return_map(F, trace_c, dev, dev_norm, delta_gamma)
 

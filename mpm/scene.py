@@ -16,6 +16,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from mpm import constitutive
+
 
 class InputError(ValueError):
   """A value given by the user (a scene key, a flag) is malformed or out of
@@ -126,6 +128,9 @@ class Material:
       (mu = mu_s + (mu_2 - mu_s) / (I_0 / I + 1), I the inertial number).
     mu_s, mu_2, I_0, grain_diameter (m), grain_density (kg/m^3): the mu(I)
       parameters (docs/physics.md); None with Drucker-Prager.
+    alpha_reg: with "mu_i_regularized" (mu(I) with Barker & Gray 2017's
+      partial regularisation below the inertial number where the plain law
+      turns ill-posed), the exponent of its low-I branch; None otherwise.
   """
   density: float = 1538.0            # kg / m^3
   youngs_modulus: float = 3.537e5    # Pa
@@ -137,14 +142,16 @@ class Material:
   I_0: float | None = None  # pylint: disable=invalid-name (the literature's)
   grain_diameter: float | None = None
   grain_density: float | None = None
+  alpha_reg: float | None = None
 
   def to_dict(self) -> dict[str, Any]:
     """The JSON form; the mu(I) keys only with that rheology (so the
     paper's files are unchanged)."""
     d = dataclasses.asdict(self)
-    if self.rheology == "drucker_prager":
-      for key in RHEOLOGIES["mu_i"]:
+    for key in RHEOLOGY_KEYS:
+      if key not in RHEOLOGIES[self.rheology]:
         del d[key]
+    if self.rheology == "drucker_prager":
       del d["rheology"]
     return d
 
@@ -153,13 +160,19 @@ class Material:
 RHEOLOGIES = {
     "drucker_prager": (),
     "mu_i": ("mu_s", "mu_2", "I_0", "grain_diameter", "grain_density"),
+    "mu_i_regularized": ("mu_s", "mu_2", "I_0", "grain_diameter",
+                         "grain_density", "alpha_reg"),
 }
+RHEOLOGY_KEYS = tuple(dict.fromkeys(k for keys in RHEOLOGIES.values()
+                                    for k in keys))
 # mu(I) defaults: mu_2 - mu_s and I_0 of glass beads (Jop, Forterre &
 # Pouliquen 2006), sand grains of 0.5 mm, quartz.
 MU_I_DELTA = 0.26
 MU_I_I0 = 0.279
 MU_I_GRAIN_DIAMETER = 0.0005  # m
 MU_I_GRAIN_DENSITY = 2650.0   # kg / m^3
+# Barker & Gray (2017)'s exponent of the regularised low-I branch.
+MU_I_ALPHA_REG = 1.9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -284,7 +297,7 @@ def with_rheology(scene: "Scene", rheology: str) -> "Scene":
   """``scene`` with sand of ``rheology`` (``RHEOLOGIES``), its parameters
   at their defaults for the scene's friction angle."""
   d = scene.to_dict()
-  for key in ("rheology",) + RHEOLOGIES["mu_i"]:
+  for key in ("rheology",) + RHEOLOGY_KEYS:
     d["material"].pop(key, None)
   if rheology != "drucker_prager":
     d["material"]["rheology"] = rheology
@@ -298,12 +311,14 @@ def _parse_rheology(md: Mapping[str, Any], density: float,
   if rheology not in RHEOLOGIES:
     raise InputError(f"material.rheology = {rheology!r}; allowed: one of "
                      f"{list(RHEOLOGIES)}")
-  unused = [k for k in RHEOLOGIES["mu_i"] if k in md]
-  if rheology != "mu_i":
-    if unused:
-      raise InputError(f"material: {unused} only apply with "
-                       "material.rheology = 'mu_i'; allowed: set it, or "
-                       "leave them out")
+  unused = [k for k in RHEOLOGY_KEYS
+            if k in md and k not in RHEOLOGIES[rheology]]
+  if unused:
+    users = [r for r in RHEOLOGIES if set(unused) <= set(RHEOLOGIES[r])]
+    raise InputError(f"material: {unused} do not apply with "
+                     f"material.rheology = {rheology!r}; allowed: a "
+                     f"rheology of {users}, or leave them out")
+  if rheology == "drucker_prager":
     return {}
   # Default: the friction of Drucker-Prager at friction_angle_deg, which in
   # plane strain yields at tau_eq = sin(phi) p (Mohr-Coulomb in 2D), so the
@@ -322,12 +337,43 @@ def _parse_rheology(md: Mapping[str, Any], density: float,
     raise InputError(f"material.grain_density = {grain_density:g} is below "
                      f"material.density = {density:g}; allowed: >= the bulk "
                      "density (grains and the voids between them)")
-  return {"rheology": rheology, "mu_s": mu_s, "mu_2": mu_2,
-          "I_0": _number(md, "I_0", MU_I_I0, "material", 0, 10,
-                         lo_open=True),
-          "grain_diameter": _number(md, "grain_diameter", MU_I_GRAIN_DIAMETER,
-                                    "material", 0, 0.1, lo_open=True),
-          "grain_density": grain_density}
+  out = {"rheology": rheology, "mu_s": mu_s, "mu_2": mu_2,
+         "I_0": _number(md, "I_0", MU_I_I0, "material", 0, 10,
+                        lo_open=True),
+         "grain_diameter": _number(md, "grain_diameter", MU_I_GRAIN_DIAMETER,
+                                   "material", 0, 0.1, lo_open=True),
+         "grain_density": grain_density}
+  if rheology == "mu_i_regularized":
+    out["alpha_reg"] = _number(md, "alpha_reg", MU_I_ALPHA_REG, "material",
+                               0, 10, lo_open=True)
+    _check_regularizable(mu_s, mu_2, out["I_0"], out["alpha_reg"])
+  return out
+
+
+def _check_regularizable(mu_s: float, mu_2: float, i_0: float,
+                         alpha_reg: float) -> None:
+  """Refuses parameters the partial regularisation cannot serve: a plain law
+  ill-posed at every I (no threshold to join at), or a low-I branch that is
+  ill-posed itself (there nu = I mu' / mu = mu^2 / (2 alpha_reg))."""
+  i_n = constitutive.regularization_threshold(mu_s, mu_2, i_0)
+  if i_n is None:
+    ok = [m / 100 for m in range(1, 100) if constitutive.
+          regularization_threshold(m / 100, m / 100 + mu_2 - mu_s, i_0)]
+    hint = (f"mu_s <= {max(ok):.2f} at this mu_2 - mu_s and I_0" if ok else
+            "a larger mu_2 - mu_s")
+    raise InputError(
+        f"material: mu(I) with mu_s = {mu_s:.3g}, mu_2 = {mu_2:.3g}, I_0 = "
+        f"{i_0:.3g} is ill-posed at every inertial number (Barker & Gray "
+        "2017), so material.rheology = 'mu_i_regularized' has no threshold "
+        f"to regularise below; allowed: {hint} (docs/physics.md, section 12)")
+  mu_n = mu_s + (mu_2 - mu_s) * i_n / (i_0 + i_n)
+  mu = np.linspace(1e-3, mu_n, 200)
+  if np.any(constitutive.ill_posedness(1.0, mu, mu**3 / (2 * alpha_reg)) >
+            1e-9):
+    raise InputError(
+        f"material.alpha_reg = {alpha_reg:g}: the regularised branch is "
+        f"itself ill-posed below mu(I_N) = {mu_n:.3g}; allowed: a smaller "
+        "alpha_reg (Barker & Gray 2017 use 1.9)")
 
 
 def _parse_ramp(d: Mapping[str, Any], domain: Domain) -> Ramp:

@@ -124,7 +124,16 @@ def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
       mu_i=None if m.rheology == "drucker_prager" else constitutive.MuI(
           mu_s=f32(m.mu_s), mu_2=f32(m.mu_2), I_0=f32(m.I_0),
           grain_diameter=f32(m.grain_diameter),
-          grain_density=f32(m.grain_density)))
+          grain_density=f32(m.grain_density), **_regularization(m)))
+
+
+def _regularization(m: scene_lib.Material) -> dict[str, jax.Array]:
+  """``MuI``'s I_N and alpha_reg for the regularised rheology, else none."""
+  if m.rheology != "mu_i_regularized":
+    return {}
+  i_n = constitutive.regularization_threshold(m.mu_s, m.mu_2, m.I_0)
+  return {"I_N": jnp.asarray(i_n, jnp.float32),
+          "alpha_reg": jnp.asarray(m.alpha_reg, jnp.float32)}
 
 
 def _bucket(n: int, multiple: int) -> int:

@@ -3,7 +3,7 @@ paper's scenes (``python -m experiments.convergence``).
 
 A column of sand (height h0, width h0 / a for aspect ratio a) against a
 frictionless wall collapses on a flat floor (friction 0.7, friction angle 45
-deg). The normalised runout (L - L0) / L0 is measured from the furthest
+deg unless ``friction_angle`` says otherwise). The normalised runout (L - L0) / L0 is measured from the furthest
 particle (the front), from the 99.5% and 90% quantiles of x (L behind which
 that fraction of the sand lies) and from the centre of mass: the front
 measures the deposit's thinnest toe, the centre its bulk.
@@ -53,11 +53,12 @@ def column_domain(aspect: float, height: float) -> tuple[float, float]:
 
 def column_scene(aspect: float, spacing: float, height: float = 0.1,
                  cfl: float = 0.4, duration: float = 0.8,
-                 rheology: str = "drucker_prager") -> mpm.Scene:
+                 rheology: str = "drucker_prager",
+                 friction_angle: float = FRICTION_ANGLE) -> mpm.Scene:
   """A column of ``height`` (m) and width height / aspect against the left
   wall, on a flat floor with room to run out; grid spacing 2 x spacing;
   the sand of ``rheology`` (mu(I) with its defaults: at rest the same as
-  Drucker-Prager's)."""
+  Drucker-Prager's at ``friction_angle``, deg)."""
   width0 = height / aspect
   width, top = column_domain(aspect, height)
   suffix = "" if rheology == "drucker_prager" else f"_{rheology}"
@@ -67,7 +68,7 @@ def column_scene(aspect: float, spacing: float, height: float = 0.1,
       "ramp": {"kind": "polyline", "points": [[0.0, FLOOR], [width, FLOOR]]},
       "granular": {"box": [0.0, FLOOR, width0, FLOOR + height],
                    "spacing": spacing, "num_particles": None},
-      "material": {"friction_angle_deg": FRICTION_ANGLE},
+      "material": {"friction_angle_deg": friction_angle},
       "boundary_friction": FLOOR_FRICTION, "wall_friction": 0.0,
       "solver": {"dx": 2 * spacing, "cfl": cfl},
       "num_frames": int(round(duration / FRAME_TIME))}), rheology)
@@ -214,6 +215,9 @@ class Settings(settings.Base):
                                  strict=True, upper=1)
   time: float = settings.field(0.8, "Simulated time of the column (s).",
                                lower=0, strict=True, upper=10)
+  friction_angle: float = settings.field(
+      FRICTION_ANGLE, "Friction angle (deg) of the column's sand (mu(I): "
+      "mu_s = its sine).", lower=0, strict=True, upper=80)
   paper_scenes: tuple[int, ...] = settings.field(
       (), "Indices of test-plan scenes to measure too (600 frames each).",
       lower=0, upper=PLAN_SIZE - 1, allow_empty=True)
@@ -239,6 +243,19 @@ class Settings(settings.Base):
           f"--time={self.time:g}: {frames} frames of {FRAME_TIME * 1e3:g} "
           f"ms; allowed: >= {(STILL_FRAMES + 1) * FRAME_TIME:g} s (the "
           f"last {STILL_FRAMES} frames tell whether the sand still moves)")
+    for rheology in self.rheologies:
+      for what, angle, used in (
+          ("--friction_angle", self.friction_angle, self.aspect_ratios),
+          ("the paper scenes' friction angle",
+           scene_lib.Material.friction_angle_deg, self.paper_scenes)):
+        try:
+          scene_lib.with_rheology(mpm.Scene.from_dict(
+              {"material": {"friction_angle_deg": angle}}), rheology)
+        except mpm.InputError as e:
+          if used:
+            raise settings.InputError(
+                f"--rheologies={rheology} with {what} = {angle:g}: {e}"
+                ) from None
     _coarse_to_fine("spacings", self.spacings)
     _coarse_to_fine("paper_spacings", self.paper_spacings)
     h, coarsest = self.height, max(self.spacings)
@@ -252,7 +269,9 @@ class Settings(settings.Base):
             "the grid, twice the spacing, 4 cells across the domain)")
       for spacing in self.spacings:
         try:
-          column_scene(a, spacing, h, self.cfl, self.time)
+          for rheology in self.rheologies:
+            column_scene(a, spacing, h, self.cfl, self.time, rheology,
+                         self.friction_angle)
         except mpm.InputError as e:
           raise settings.InputError(
               f"--aspect_ratios={a:g} with --spacings={spacing:g} and "
@@ -274,7 +293,8 @@ class Settings(settings.Base):
     column = {"spacing": "--spacings", "num_frames": None, "dx": None,
               "scenes": None}
     plan = [budget.Planned(column_scene(a, spacing, self.height, self.cfl,
-                                        self.time), names=column,
+                                        self.time, friction_angle=self.
+                                        friction_angle), names=column,
                            count=len(self.rheologies))
             for a in self.aspect_ratios for spacing in self.spacings]
     paper = {**column, "spacing": "--paper_spacings"}
@@ -359,7 +379,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
     for spacing in tqdm.tqdm(s.spacings, desc=f"a = {aspect:g} {rheology}",
                              unit="run"):
       scene = column_scene(aspect, spacing, s.height, s.cfl, s.time,
-                           rheology)
+                           rheology, s.friction_angle)
       x, wall = simulate(scene, f"column, a = {aspect:g}, {rheology}",
                          spacing)
       column_rows.append({

@@ -357,5 +357,156 @@ class MuITest(parameterized.TestCase):
     self.assertGreater(abs(float(g_r.mu_s)), 0.0)
 
 
+# Glass beads (Jop, Forterre & Pouliquen 2006): mu(I) is well-posed from
+# I_N = 0.0197 up, so the partial regularisation applies.
+GLASS = (0.383, 0.643, 0.279)
+
+
+def _regularized(alpha=1.9):
+  i_n = constitutive.regularization_threshold(*GLASS)
+  return constitutive.MuI(*(jnp.float32(v) for v in GLASS + (5e-4, 2650.0)),
+                          I_N=jnp.float32(i_n), alpha_reg=jnp.float32(alpha))
+
+
+def _mu_regularized_64(inertial, alpha=1.9):
+  """Barker & Gray's law in float64, written out here."""
+  mu_s, mu_2, i_0 = GLASS
+  i_n = constitutive.regularization_threshold(*GLASS)
+  mu_n = mu_s + (mu_2 - mu_s) * i_n / (i_0 + i_n)
+  log_a = math.log(i_n) + alpha / mu_n**2
+  inertial = np.maximum(inertial, 1e-300)
+  return np.where(inertial >= i_n,
+                  mu_s + (mu_2 - mu_s) * inertial / (i_0 + inertial),
+                  np.sqrt(alpha / (log_a - np.log(inertial))))
+
+
+class RegularizedMuITest(parameterized.TestCase):
+  """Barker & Gray (2017)'s partial regularisation (``mu_i_regularized``)."""
+
+  def test_threshold_is_where_the_plain_law_turns_well_posed(self):
+    mu_s, mu_2, i_0 = GLASS
+    i_n = constitutive.regularization_threshold(*GLASS)
+    self.assertBetween(i_n, 0.015, 0.025)
+    for i, ill in ((0.99 * i_n, True), (1.01 * i_n, False), (0.1, False)):
+      mu = mu_s + (mu_2 - mu_s) * i / (i_0 + i)
+      c = constitutive.ill_posedness(i, mu, (mu_2 - mu_s) * i_0 / (i_0 + i)**2)
+      self.assertEqual(c > 0, ill, msg=f"I = {i:g}: C = {c:g}")
+    # Constant friction (nu = 0) is ill-posed; so is the paper's sand.
+    self.assertGreater(constitutive.ill_posedness(0.1, 0.6, 0.0), 0)
+    sand = math.sin(math.radians(35.0))
+    self.assertIsNone(
+        constitutive.regularization_threshold(sand, sand + 0.26, 0.279))
+
+  def test_the_law_is_continuous_well_posed_below_i_n_and_tends_to_zero(self):
+    rheology = _regularized()
+    i_n = float(rheology.I_N)
+    above = float(constitutive.mu_regularized(i_n * 1.0001, rheology))
+    below = float(constitutive.mu_regularized(i_n * 0.9999, rheology))
+    self.assertAlmostEqual(above, below, delta=1e-4)
+    i = np.logspace(-30, math.log10(i_n), 300)
+    mu = np.asarray(constitutive.mu_regularized(jnp.asarray(i), rheology))
+    np.testing.assert_allclose(mu, _mu_regularized_64(i), rtol=1e-5)
+    # Below I_N: nu = I mu' / mu = mu^2 / (2 alpha).
+    self.assertTrue(np.all(constitutive.ill_posedness(
+        1.0, mu, mu**3 / (2 * 1.9)) <= 0))
+    self.assertLess(mu[0], 0.2)    # no yield stress: mu -> 0 as I -> 0
+
+  def test_the_return_against_a_brute_force_root(self):
+    """Trial states from far below mu_s (creep at I ~ 1e-30) to far above
+    (I > I_N): the returned shear stress is tau_trial - y with y the root,
+    by bisection in float64, of tau_trial - y = p mu(c y)."""
+    rng = np.random.default_rng(7)
+    n, dt = 400, 1e-4
+    # Compressed by 0.02-2% in area, sheared so that tau_trial / p is
+    # 0.1-1.2.
+    log_j = -rng.uniform(2e-4, 2e-2, n)
+    p = -(MU + LAM) * log_j
+    ratio = rng.uniform(0.1, 1.2, n)
+    shear = ratio * p / (2 * MU)     # tau_eq = 2 mu eps_xy for small shear
+    f = np.zeros((n, 2, 2))
+    f[:, 0, 0] = f[:, 1, 1] = np.exp(log_j / 2)
+    f[:, 0, 1] = f[:, 1, 0] = np.sinh(shear) * np.exp(log_j / 2)
+    f = f.astype(np.float32)
+    p_tr, tau_tr = _pressure_and_shear(constitutive.kirchhoff_stress(
+        f, MU, LAM))
+    c = 5e-4 / (MU * dt * np.sqrt(p_tr / 2650.0))
+    lo, hi = np.zeros(n), tau_tr.copy()
+    for _ in range(200):
+      mid = (lo + hi) / 2
+      up = tau_tr - mid - p_tr * _mu_regularized_64(c * mid) > 0
+      lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
+    f_new, _ = _project_mu_i(f, np.zeros(n, np.float32), MU, LAM,
+                             _regularized(), dt)
+    _, tau_new = _pressure_and_shear(constitutive.kirchhoff_stress(
+        f_new, MU, LAM))
+    np.testing.assert_allclose(tau_new, tau_tr - lo, rtol=0,
+                               atol=2e-4 * tau_tr.max())
+    implied = c * lo
+    i_n = constitutive.regularization_threshold(*GLASS)
+    self.assertGreater(np.sum(implied > i_n), 20)      # both branches
+    self.assertGreater(np.sum(implied < 1e-6), 20)     # creep, below mu_s
+
+  def test_above_i_n_it_is_the_plain_return(self):
+    f = _random_f(np.random.default_rng(8), 500).astype(np.float32)
+    plain = constitutive.MuI(*(jnp.float32(v) for v in GLASS + (5e-4,
+                                                                 2650.0)))
+    dt = 1e-4
+    f_plain, vc_plain = _project_mu_i(f, np.zeros(500, np.float32), MU, LAM,
+                                      plain, dt)
+    f_reg, vc_reg = _project_mu_i(f, np.zeros(500, np.float32), MU, LAM,
+                                  _regularized(), dt)
+    p, tau_tr = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
+    _, tau_plain = _pressure_and_shear(constitutive.kirchhoff_stress(
+        f_plain, MU, LAM))
+    implied = (tau_tr - tau_plain) / (MU * dt) * 5e-4 / np.sqrt(
+        np.maximum(p, 1e-9) / 2650.0)
+    fast = (p > 0) & (implied > 1.05 * constitutive.regularization_threshold(
+        *GLASS))
+    self.assertGreater(fast.sum(), 50)
+    np.testing.assert_array_equal(f_reg[fast], f_plain[fast])
+    np.testing.assert_array_equal(vc_reg, vc_plain)
+
+  @parameterized.parameters(3.0, 10.0)
+  def test_steady_simple_shear_below_i_n_follows_the_regularized_law(
+      self, shear_rate):
+    dt, rheology = 1e-5, _regularized()
+    step = jnp.asarray([[1.0, shear_rate * dt], [0.0, 1.0]], jnp.float32)
+    f0 = jnp.eye(2, dtype=jnp.float32) * math.exp(-0.0005)
+
+    def body(_, state):
+      f, vc = state
+      return _project_mu_i(step @ f, vc, MU, LAM, rheology, dt)
+
+    f, _ = jax.jit(lambda f0: jax.lax.fori_loop(
+        0, 4000, body, (f0, jnp.zeros(()))))(f0)
+    p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
+    inertial = shear_rate * 5e-4 / math.sqrt(p / 2650.0)
+    self.assertLess(inertial, float(rheology.I_N))
+    expected = float(_mu_regularized_64(inertial))
+    self.assertAlmostEqual(tau / p, expected, delta=0.01 * expected)
+
+  def test_gradients_finite_and_match_finite_differences(self):
+    f = np.concatenate([
+        np.broadcast_to(np.eye(2), (3, 2, 2)),
+        _random_f(np.random.default_rng(9), 200, log_mean=(-0.05, -0.01))
+    ]).astype(np.float32)
+
+    def loss(f, alpha):
+      rheology = _regularized().replace(alpha_reg=alpha)
+      f_new, vc = constitutive.project_mu_i(f, jnp.zeros(f.shape[0]), MU,
+                                            LAM, rheology, 1e-4)
+      return jnp.sum(_stress(f_new, MU, LAM)) + jnp.sum(vc)
+
+    g_f, g_alpha = jax.jit(jax.grad(loss, argnums=(0, 1)))(
+        jnp.asarray(f), jnp.float32(1.9))
+    self.assertTrue(np.all(np.isfinite(g_f)))
+    # A wide step: the stresses' float32 rounding swamps a narrow one.
+    h = 0.1
+    fd = (loss(f, jnp.float32(1.9 + h)) - loss(f, jnp.float32(1.9 - h))) / (
+        2 * h)
+    self.assertNotEqual(float(g_alpha), 0.0)
+    self.assertAlmostEqual(float(g_alpha) / float(fd), 1.0, delta=0.02)
+
+
 if __name__ == "__main__":
   absltest.main()

@@ -167,10 +167,24 @@ def _invalid_cases():
       # The mu(I) rheology.
       dict(testcase_name="unknown_rheology",
            d=_with(material__rheology="bingham"), key="material.rheology",
-           allowed="allowed: one of ['drucker_prager', 'mu_i']"),
+           allowed="allowed: one of ['drucker_prager', 'mu_i', "
+           "'mu_i_regularized']"),
       dict(testcase_name="mu_i_key_without_mu_i",
            d=_with(material__mu_2=0.9), key="material",
-           allowed="only apply with material.rheology = 'mu_i'"),
+           allowed="allowed: a rheology of ['mu_i', 'mu_i_regularized']"),
+      dict(testcase_name="regularization_key_with_plain_mu_i",
+           d=_with(material__rheology="mu_i", material__alpha_reg=1.0),
+           key="material", allowed="allowed: a rheology of "
+           "['mu_i_regularized']"),
+      # The paper's sand (mu_s = sin 35 deg, mu_2 = mu_s + 0.26): mu(I) is
+      # ill-posed at every I, so there is nothing to regularise below.
+      dict(testcase_name="regularized_without_a_well_posed_range",
+           d=_with(material__rheology="mu_i_regularized"), key="material",
+           allowed="allowed: mu_s <= 0.52 at this mu_2 - mu_s"),
+      dict(testcase_name="regularized_branch_ill_posed",
+           d=_with(material__rheology="mu_i_regularized",
+                   material__mu_s=0.38, material__alpha_reg=9.0),
+           key="material.alpha_reg", allowed="allowed: a smaller"),
       dict(testcase_name="mu_2_not_above_mu_s",
            d=_with(material__rheology="mu_i", material__mu_s=0.6,
                    material__mu_2=0.6), key="material.mu_2",
@@ -310,6 +324,8 @@ class RoundTripTest(parameterized.TestCase):
       ("mu_i", {"material": {"rheology": "mu_i", "mu_s": 0.5, "mu_2": 0.7,
                              "I_0": 0.3, "grain_diameter": 0.001,
                              "grain_density": 2500}}),
+      ("mu_i_regularized", {"material": {"rheology": "mu_i_regularized",
+                                         "mu_s": 0.38, "alpha_reg": 1.5}}),
   )
   def test_dict_and_json(self, d):
     scene = mpm.Scene.from_dict(d)

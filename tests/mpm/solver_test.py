@@ -466,11 +466,14 @@ class SlopeTest(parameterized.TestCase):
   friction at rest, sin(35 deg) = 0.57 for both rheologies: 29.8 deg) and
   flows once tan(theta) passes mu_2 (mu(I): 0.83, 39.8 deg)."""
 
-  def _end_speed(self, theta_deg, rheology):
+  def _end_speed(self, theta_deg, rheology, friction_angle_deg=35.0):
     """Mean particle speed (m/s) over the last 10 ms of 0.4 s."""
-    scene = scene_lib.with_rheology(_flat_scene(
+    scene = _flat_scene(
         0.3, 0.2, (0.0, FLOOR + 1e-4, 0.3, FLOOR + 0.05), 0.005, 0.01,
-        boundary_friction=2.0, num_frames=41, frame_dt=0.01), rheology)
+        boundary_friction=2.0, num_frames=41, frame_dt=0.01)
+    d = scene.to_dict()
+    d["material"]["friction_angle_deg"] = friction_angle_deg
+    scene = scene_lib.with_rheology(mpm.Scene.from_dict(d), rheology)
     s = mpm.setup(scene)
     theta = math.radians(theta_deg)
     params = s.params.replace(gravity=jnp.asarray(
@@ -490,6 +493,14 @@ class SlopeTest(parameterized.TestCase):
   @parameterized.parameters("drucker_prager", "mu_i")
   def test_above_mu_2_the_slope_flows(self, rheology):
     self.assertGreater(self._end_speed(45.0, rheology), 0.05)
+
+  def test_regularized_below_mu_s_creeps_imperceptibly_and_flows_above(self):
+    """Barker & Gray's law has no yield stress, but at tan 15 deg = 0.27
+    against mu_s = sin 22.5 deg = 0.38 its rate, I = A exp(-alpha / mu^2)
+    ~ 1e-8, is nothing a run sees; at 45 deg it flows. (The default sand,
+    35 deg, has no well-posed range to regularise below.)"""
+    self.assertLess(self._end_speed(15.0, "mu_i_regularized", 22.5), 0.01)
+    self.assertGreater(self._end_speed(45.0, "mu_i_regularized", 22.5), 0.05)
 
 
 if __name__ == "__main__":

@@ -100,7 +100,15 @@ class SettingsTest(absltest.TestCase):
            ({"paper_scenes": (0, 100)}, "--paper_scenes=100: allowed: <= 99"),
            ({"paper_scenes": (1,), "paper_spacings": (0.2, 0.01)},
             "--paper_spacings=0.2: scene test/00001/semicircle "
-            r"\(--paper_scenes=1\) is refused at this spacing: solver.dx")]
+            r"\(--paper_scenes=1\) is refused at this spacing: solver.dx"),
+           ({"rheologies": ("mu_i_regularized",)},
+            "--rheologies=mu_i_regularized with --friction_angle = 45: "
+            "material: mu\\(I\\) with mu_s = 0.707.* is ill-posed at every "
+            "inertial number"),
+           ({"rheologies": ("mu_i_regularized",), "friction_angle": 22.5,
+             "paper_scenes": (0,)},
+            "--rheologies=mu_i_regularized with the paper scenes' friction "
+            "angle = 35")]
     for changes, message in bad:
       with self.assertRaisesRegex(mpm.InputError, "^" + message,
                                   msg=str(changes)):
