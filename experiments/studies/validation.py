@@ -84,8 +84,10 @@ class Settings(settings.Base):
       "speed scales as 1/d, its shape does not.", lower=0, strict=True,
       upper=0.1)
   rheologies: tuple[str, ...] = settings.field(
-      ("drucker_prager", "mu_i"), "Rheologies, each run on every case.",
-      choices=tuple(scene_lib.RHEOLOGIES), distinct=True)
+      ("drucker_prager", "mu_i"), "Rheologies, each run on every case "
+      "(not mu_i_regularized: these sands have no well-posed range for it, "
+      "docs/physics.md section 12).",
+      choices=("drucker_prager", "mu_i"), distinct=True)
   command: str = settings.field(
       "", "The command line that asked for the run, for the report.",
       flag=False)

@@ -305,10 +305,16 @@ ROWS = (
     ("generate_unknown_rheology", "experiments.generate_dataset",
      [TEST, "--config.dataset.rheology=mui", "--out={d}/out"],
      "dataset.rheology = 'mui'; allowed: one of ['drucker_prager', "
-     "'mu_i']"),
+     "'mu_i', 'mu_i_regularized']"),
     ("convergence_unknown_rheology", "experiments.convergence",
      ["--out={d}/out", "--rheologies=drucker_prager,mui"],
-     "--rheologies=mui: allowed: one of ['drucker_prager', 'mu_i']"),
+     "--rheologies=mui: allowed: one of ['drucker_prager', 'mu_i', "
+     "'mu_i_regularized']"),
+    ("convergence_regularized_without_a_well_posed_range",
+     "experiments.convergence",
+     ["--out={d}/out", "--rheologies=mu_i_regularized"],
+     "--rheologies=mu_i_regularized with --friction_angle = 45: material: "
+     "mu(I) with mu_s = 0.707"),
     ("generate_spacing_too_fine", "experiments.generate_dataset",
      [TEST, "--config.dataset.spacing=0.00002", "--out={d}/out"],
      "dataset.spacing = 2e-05, dataset.num_frames = 20: 93,750,000 "
