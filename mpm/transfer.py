@@ -95,19 +95,22 @@ def stencil(x: jax.Array, spec: GridSpec,
   offset = jnp.stack([jnp.broadcast_to(ox[:, :, None], (x.shape[0], 3, 3)),
                       jnp.broadcast_to(oy[:, None, :], (x.shape[0], 3, 3))],
                      -1).reshape(-1, 9, 2)
-  b = base.astype(jnp.int32)
-  if window_at is not None:
-    b = b - window_at[None, :]
   oi = np.arange(3, dtype=np.int32)
   if spec.periodic_x:
+    b = base.astype(jnp.int32)
+    if window_at is not None:
+      b = b - window_at[None, :]
     column = (b[:, :1, None] + oi[None, :, None]) % spec.shape[0]
     index = (column * spec.shape[1] + b[:, 1:, None] +
              oi[None, None, :]).reshape(-1, 9)
   else:
-    # One base index per particle plus constant offsets: cheaper than per
-    # stencil node, and the same integers.
-    node = jnp.asarray((oi[:, None] * spec.shape[1] + oi[None, :]).ravel())
-    index = (b[:, 0] * spec.shape[1] + b[:, 1])[:, None] + node[None, :]
+    # One flat base index per particle plus constant offsets, in floats
+    # (exact below 2^24 nodes) and converted once: XLA recomputes it in each
+    # consumer, per element.
+    b = base if window_at is None else base - window_at.astype(x.dtype)
+    node = (oi[:, None] * spec.shape[1] + oi[None, :]).ravel()
+    index = ((b[:, 0] * spec.shape[1] + b[:, 1])[:, None] +
+             jnp.asarray(node, x.dtype)[None, :]).astype(jnp.int32)
   return Stencil(index, weight, offset)
 
 
@@ -137,9 +140,13 @@ def p2g(st: Stencil, mass: jax.Array, momentum: jax.Array, affine: jax.Array,
   values = jax.lax.optimization_barrier(values)
   # Positions are clamped to the domain, whose stencils lie inside the padded
   # grid, so the bounds check can be skipped (it costs a third of the scatter).
-  return jnp.zeros((n_nodes, 3), values.dtype).at[
-      _unsigned(st.index).reshape(-1)].add(values.reshape(-1, 3),
-                                           mode="promise_in_bounds")
+  dims = jax.lax.ScatterDimensionNumbers(
+      update_window_dims=(1,), inserted_window_dims=(0,),
+      scatter_dims_to_operand_dims=(0,))
+  return jax.lax.scatter_add(
+      jnp.zeros((n_nodes, 3), values.dtype),
+      _unsigned(st.index).reshape(-1, 1), values.reshape(-1, 3), dims,
+      mode=jax.lax.GatherScatterMode.PROMISE_IN_BOUNDS)
 
 
 def grid_velocity(grid: jax.Array, min_mass) -> jax.Array:
@@ -168,7 +175,11 @@ def gather(st: Stencil, table: jax.Array) -> jax.Array:
   One gather of K columns costs about what one of a single column does (the
   cost is per index), so callers pack what they gather into one table.
   """
-  return table.at[_unsigned(st.index)].get(mode="promise_in_bounds")
+  dims = jax.lax.GatherDimensionNumbers(
+      offset_dims=(2,), collapsed_slice_dims=(0,), start_index_map=(0,))
+  return jax.lax.gather(table, _unsigned(st.index)[..., None], dims,
+                        (1, table.shape[1]),
+                        mode=jax.lax.GatherScatterMode.PROMISE_IN_BOUNDS)
 
 
 def g2p(st: Stencil, grid_v: jax.Array, dx: float):
