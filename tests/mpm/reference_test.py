@@ -85,7 +85,8 @@ def _substep(state, params, field, spec):
   affine = ((-dt * 4.0 / spec.dx**2) * state.volume[:, None, None] * tau +
             mass[:, None, None] * state.C)
   grid = _p2g(st, mass, mass[:, None] * state.v, affine, spec.n_nodes)
-  grid_v = transfer.grid_velocity(grid, solver._MIN_NODE_MASS * jnp.max(mass))  # pylint: disable=protected-access
+  min_mass = solver._MIN_NODE_MASS * jnp.max(mass)  # pylint: disable=protected-access
+  grid_v = transfer.grid_velocity(grid, min_mass)
   grid_v = grid_v + dt * params.gravity[None, :]
   grid_v = boundary.apply(field, grid_v, params.boundary_friction,
                           params.wall_friction)
