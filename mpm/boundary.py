@@ -161,7 +161,8 @@ def apply(field: BoundaryField, grid_v: jax.Array, boundary_friction,
 
 
 def project_particles(field: BoundaryField, st: transfer.Stencil,
-                      x_new: jax.Array, x_old: jax.Array, dx: float):
+                      x_new: jax.Array, x_old: jax.Array, dx: float,
+                      phi_i: jax.Array | None = None):
   """Pushes particles that moved into a solid back onto its surface.
 
   The signed distance at the old position and its gradient come from the
@@ -174,11 +175,15 @@ def project_particles(field: BoundaryField, st: transfer.Stencil,
     st: stencils of the old positions ``x_old`` [N, 2].
     x_new: [N, 2] positions after advection (m).
     dx: grid spacing (m).
+    phi_i: [N, S] ``field.phi`` at the stencils, if the caller gathered it
+      (``solver.substep`` packs it with the node velocities); else gathered
+      here.
 
   Returns:
     [N, 2] positions with phi >= 0 (to first order).
   """
-  phi_i = field.phi[st.index]                                # [N, S]
+  if phi_i is None:
+    phi_i = transfer.gather(st, field.phi[:, None])[..., 0]  # [N, S]
   w_phi = st.weight * phi_i
   phi = jnp.sum(w_phi, -1)
   grad = (4.0 / dx**2) * jnp.sum(w_phi[..., None] * st.offset, 1)  # [N, 2]

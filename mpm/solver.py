@@ -113,10 +113,14 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   grid_v = boundary.apply(field, grid_v, params.boundary_friction,
                           params.wall_friction)
 
-  v, C = transfer.g2p(st, grid_v, spec.dx)
+  # One gather of velocity and signed distance (a gather costs per index).
+  gathered = transfer.gather(
+      st, jnp.concatenate([grid_v, field.phi[:, None]], -1))  # [N, S, 3]
+  v, C = transfer.g2p_gathered(st, gathered[..., :2], spec.dx)
   v = v * active[:, None]
   C = C * active[:, None, None]
-  x = boundary.project_particles(field, st, state.x + dt * v, state.x, spec.dx)
+  x = boundary.project_particles(field, st, state.x + dt * v, state.x, spec.dx,
+                                 gathered[..., 2])
   if spec.periodic_x:
     x = jnp.stack([jnp.mod(x[:, 0], params.domain[0]),
                    jnp.clip(x[:, 1], 0.0, params.domain[1])], -1)

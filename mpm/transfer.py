@@ -98,12 +98,19 @@ def stencil(x: jax.Array, spec: GridSpec,
   b = base.astype(jnp.int32)
   if window_at is not None:
     b = b - window_at[None, :]
-  oi = jnp.arange(3, dtype=jnp.int32)
-  column = b[:, :1, None] + oi[None, :, None]
+  oi = np.arange(3, dtype=np.int32)
   if spec.periodic_x:
-    column = column % spec.shape[0]
-  index = (column * spec.shape[1] + b[:, 1:, None] +
-           oi[None, None, :]).reshape(-1, 9)
+    column = (b[:, :1, None] + oi[None, :, None]) % spec.shape[0]
+    index = (column * spec.shape[1] + b[:, 1:, None] +
+             oi[None, None, :]).reshape(-1, 9)
+  else:
+    # One flat base index per particle plus constant offsets. The base is a
+    # reduction, so that XLA computes it once per particle: as an
+    # elementwise expression it is recomputed, float-to-int conversion
+    # included, per stencil node in every consumer (measured 3x the cost).
+    flat = jnp.sum(b * jnp.asarray([[spec.shape[1], 1]], jnp.int32), -1)
+    node = (oi[:, None] * spec.shape[1] + oi[None, :]).ravel()
+    index = flat[:, None] + jnp.asarray(node)[None, :]
   return Stencil(index, weight, offset)
 
 
@@ -133,8 +140,13 @@ def p2g(st: Stencil, mass: jax.Array, momentum: jax.Array, affine: jax.Array,
   values = jax.lax.optimization_barrier(values)
   # Positions are clamped to the domain, whose stencils lie inside the padded
   # grid, so the bounds check can be skipped (it costs a third of the scatter).
-  return jnp.zeros((n_nodes, 3), values.dtype).at[st.index.reshape(-1)].add(
-      values.reshape(-1, 3), mode="promise_in_bounds")
+  dims = jax.lax.ScatterDimensionNumbers(
+      update_window_dims=(1,), inserted_window_dims=(0,),
+      scatter_dims_to_operand_dims=(0,))
+  return jax.lax.scatter_add(
+      jnp.zeros((n_nodes, 3), values.dtype),
+      _unsigned(st.index).reshape(-1, 1), values.reshape(-1, 3), dims,
+      mode=jax.lax.GatherScatterMode.PROMISE_IN_BOUNDS)
 
 
 def grid_velocity(grid: jax.Array, min_mass) -> jax.Array:
@@ -151,6 +163,25 @@ def grid_velocity(grid: jax.Array, min_mass) -> jax.Array:
   return jnp.where(heavy, grid[:, :2] / jnp.where(heavy, mass, 1.0), 0.0)
 
 
+def _unsigned(index: jax.Array) -> jax.Array:
+  """Stencil indices as uint32 (the same values; a gather of 27,648
+  elements measured 6.5 us with them, 8.4 us with int32)."""
+  return index.astype(jnp.uint32)
+
+
+def gather(st: Stencil, table: jax.Array) -> jax.Array:
+  """Rows [N, S, K] of a node table [G, K] at each particle's stencil.
+
+  One gather of K columns costs about what one of a single column does (the
+  cost is per index), so callers pack what they gather into one table.
+  """
+  dims = jax.lax.GatherDimensionNumbers(
+      offset_dims=(2,), collapsed_slice_dims=(0,), start_index_map=(0,))
+  return jax.lax.gather(table, _unsigned(st.index)[..., None], dims,
+                        (1, table.shape[1]),
+                        mode=jax.lax.GatherScatterMode.PROMISE_IN_BOUNDS)
+
+
 def g2p(st: Stencil, grid_v: jax.Array, dx: float):
   """Grid to particle: velocity and APIC affine field.
 
@@ -162,7 +193,11 @@ def g2p(st: Stencil, grid_v: jax.Array, dx: float):
   Returns:
     v: [N, 2] particle velocities; C: [N, 2, 2] velocity gradients (1/s).
   """
-  gv = grid_v.at[st.index].get(mode="promise_in_bounds")  # [N, S, 2]
+  return g2p_gathered(st, gather(st, grid_v), dx)
+
+
+def g2p_gathered(st: Stencil, gv: jax.Array, dx: float):
+  """``g2p`` of node velocities already gathered, ``gv`` [N, S, 2]."""
   wv = st.weight[..., None] * gv
   v = jnp.sum(wv, axis=1)
   # An outer product summed over the stencil; written out, since tiny
