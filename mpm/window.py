@@ -20,9 +20,10 @@ WINDOW_STEPS = 8
 # whole grid instead (one program fewer, nothing to save).
 WINDOW_MAX_FRACTION = 0.6
 # Grids with fewer nodes run whole: there the window's own work costs more
-# than the nodes it skips (this CPU, docs/performance.md: 1.09-1.3x slower
-# at 5-22 thousand nodes, 0.67-0.88x at 76-83 thousand).
-WINDOW_MIN_NODES = 40_000
+# than the nodes it skips (this CPU, docs/performance.md, since the cheaper
+# substep of 2026-11-26: 1.14x slower at 5.5 thousand nodes, 0.92x at 8.9,
+# 0.82x at 20 thousand; before it the crossover was near 40 thousand).
+WINDOW_MIN_NODES = 8_000
 
 
 def window_size(spec: transfer.GridSpec, extent: np.ndarray,
