@@ -389,7 +389,8 @@ def _simulate_all(todo, parts_dir, parallel, compilation_cache, on_done):
   if batch > 1:
     for i in range(0, len(todo), batch):
       chunk = todo[i:i + batch]
-      results = simulation.simulate_batch([it.scene for it in chunk])
+      results = simulation.simulate_batch([it.scene for it in chunk],
+                                          max_batch=batch)
       for item, result in zip(chunk, results):
         on_done(_write_part(item, result, parts_dir))
     return

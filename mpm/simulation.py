@@ -532,18 +532,30 @@ def size_buckets(counts: Sequence[int],
   return groups
 
 
+def default_max_batch() -> int | None:
+  """Scenes per vmapped program when the caller does not say: one on the
+  CPU, no limit elsewhere. On the CPU a vmapped batch costs more per scene
+  than one scene at a time since the substep's per-particle stencil index
+  (2026-11-26: the 14 scenes of the speed/accuracy study in 3 size buckets
+  1.11x; docs/performance.md); on an accelerator batching is what keeps
+  the device busy."""
+  return 1 if jax.default_backend() == "cpu" else None
+
+
 def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
                    bucket_ratio: float | None = BUCKET_RATIO,
+                   max_batch: int | None = None,
                    **kwargs) -> list[SimulationResult]:
   """Simulates several scenes, as vmapped programs over scenes of similar
   size.
 
   The scenes are grouped by particle count (``size_buckets``: within a
   group the largest has at most ``bucket_ratio`` times the smallest's
-  particles); each group runs as one vmapped program, padded to its
-  largest, with the largest substep count any of its scenes needs, so every
-  scene keeps its CFL bound. ``bucket_ratio=None``: all scenes in one
-  program. Other keyword arguments are those of :func:`simulate_setups`.
+  particles); each group runs as vmapped programs of at most ``max_batch``
+  scenes (None: ``default_max_batch()``, one at a time on the CPU), each
+  padded to its largest, with the largest substep count any of its scenes
+  needs, so every scene keeps its CFL bound. ``bucket_ratio=None``: one
+  group. Other keyword arguments are those of :func:`simulate_setups`.
 
   Returns:
     The results in the order of ``scenes``.
@@ -558,6 +570,11 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
     groups = [list(range(len(setups)))]
   else:
     groups = size_buckets([s.n_particles for s in setups], bucket_ratio)
+  if max_batch is not None and max_batch < 1:
+    raise ValueError(f"simulate_batch: max_batch = {max_batch}; allowed: "
+                     ">= 1 or None")
+  size = max_batch or default_max_batch() or len(setups)
+  groups = [g[i:i + size] for g in groups for i in range(0, len(g), size)]
   results: list[SimulationResult | None] = [None] * len(setups)
   for group in groups:
     members = [setups[i] for i in group]

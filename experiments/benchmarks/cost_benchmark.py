@@ -167,7 +167,9 @@ def measure_rest(sizes: Sizes) -> dict[str, Any]:
 
 def measure_batches(sizes: Sizes) -> dict[str, Any]:
   """Seconds per trajectory over the study's scenes: one at a time, one
-  padded batch, size buckets (medians of ``repeats`` after a warm-up)."""
+  padded vmapped batch, vmapped size buckets, and ``simulate_batch``'s
+  default (``default_max_batch`` scenes per program; medians of ``repeats``
+  after a warm-up)."""
   spec = dataset.DatasetSpec(num_train=1, num_test=sizes.batch_scenes,
                              num_frames=sizes.paper_frames,
                              spacing=dataset.PAPER_SPACING)
@@ -178,8 +180,11 @@ def measure_batches(sizes: Sizes) -> dict[str, Any]:
   rows = {}
   for name, run in (
       ("one_at_a_time", lambda: [mpm.simulate(s) for s in scenes]),
-      ("one_batch", lambda: mpm.simulate_batch(scenes, bucket_ratio=None)),
-      ("size_buckets", lambda: mpm.simulate_batch(scenes))):
+      ("one_batch", lambda: mpm.simulate_batch(
+          scenes, bucket_ratio=None, max_batch=len(scenes))),
+      ("size_buckets", lambda: mpm.simulate_batch(
+          scenes, max_batch=len(scenes))),
+      ("default", lambda: mpm.simulate_batch(scenes))):
     _, rows[name] = timing.self_timed(run, sizes.repeats, per_trajectory)
   counts = [len(mpm.granular_particles(s)) for s in scenes]
   return {"scenes": len(scenes), "spacing": sizes.batch_spacing,
@@ -191,6 +196,10 @@ def measure_batches(sizes: Sizes) -> dict[str, Any]:
               rows["one_at_a_time"]["median_s"]),
           "buckets_over_one_at_a_time": (
               rows["size_buckets"]["median_s"] /
+              rows["one_at_a_time"]["median_s"]),
+          "default_max_batch": mpm.simulation.default_max_batch(),
+          "default_over_one_at_a_time": (
+              rows["default"]["median_s"] /
               rows["one_at_a_time"]["median_s"])}
 
 
@@ -252,7 +261,10 @@ def to_markdown(result: dict[str, Any]) -> str:
       f"largest {t['one_batch']['median_s']:.3f} "
       f"({b['one_batch_over_one_at_a_time']:.2f}x); {b['buckets']} size "
       f"buckets {t['size_buckets']['median_s']:.3f} "
-      f"({b['buckets_over_one_at_a_time']:.2f}x).",
+      f"({b['buckets_over_one_at_a_time']:.2f}x); `simulate_batch`'s "
+      f"default ({b['default_max_batch'] or 'all'} scene(s) per program) "
+      f"{t['default']['median_s']:.3f} "
+      f"({b['default_over_one_at_a_time']:.2f}x).",
       "",
   ]
   r = result["rest"]

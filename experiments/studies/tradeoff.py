@@ -132,9 +132,9 @@ def run_mpm(scenes: Sequence[mpm.Scene], spacing: float, *, repeats: int,
   Seconds: ``mpm.simulate``'s own clock (compilation excluded, every chunk
   synchronised), the median of ``repeats`` runs of scene ``timing_scene``
   (its first run included). Compile: the longest over the scenes (a scene
-  whose program was already compiled reports 0). Batched: the scenes as one
-  vmapped program (``mpm.simulate_batch``), per trajectory, median of
-  ``repeats``.
+  whose program was already compiled reports 0). Batched: the scenes handed
+  to ``mpm.simulate_batch`` at once (vmapped size buckets, one scene per
+  program on the CPU), per trajectory, median of ``repeats``.
   """
   scenes = [at_spacing(s, spacing) for s in scenes]
   results = []

@@ -89,7 +89,7 @@ class BatchTest(absltest.TestCase):
                          "poisson_ratio": 0.3, "friction_angle_deg": 25.0}),
     ]
     # One program for both (no size buckets): the padding is exercised.
-    batch = mpm.simulate_batch(scenes, bucket_ratio=None)
+    batch = mpm.simulate_batch(scenes, bucket_ratio=None, max_batch=2)
     for scene, result in zip(scenes, batch):
       single = mpm.simulate(scene)
       self.assertEqual(result.scene, scene)
@@ -125,7 +125,7 @@ class BatchTest(absltest.TestCase):
     scenes = [_scene("big", box=(0.05, 0.12, 0.25, 0.22)),
               _scene("small", box=(0.1, 0.12, 0.2, 0.18)),
               _scene("big2", box=(0.06, 0.12, 0.26, 0.22))]
-    results = mpm.simulate_batch(scenes)
+    results = mpm.simulate_batch(scenes, max_batch=3)
     self.assertEqual([r.scene.name for r in results], ["big", "small", "big2"])
     for scene, result in zip(scenes, results):
       np.testing.assert_allclose(result.positions,
@@ -140,9 +140,19 @@ class BatchTest(absltest.TestCase):
                                       "friction_angle_deg": 35.0})
     n_soft, n_stiff = (mpm.setup(s).n_substeps for s in (soft, stiff))
     self.assertLess(n_soft, n_stiff)
-    results = mpm.simulate_batch([soft, stiff])
+    results = mpm.simulate_batch([soft, stiff], max_batch=2)
     self.assertEqual([r.n_substeps for r in results], [n_stiff, n_stiff])
     self.assertTrue(all(np.all(np.isfinite(r.positions)) for r in results))
+    # At most max_batch per program: each alone keeps its own count, and
+    # its result is simulate's.
+    alone = mpm.simulate_batch([soft, stiff], max_batch=1)
+    self.assertEqual([r.n_substeps for r in alone], [n_soft, n_stiff])
+    np.testing.assert_array_equal(alone[0].positions,
+                                  mpm.simulate(soft).positions)
+    with self.assertRaisesRegex(ValueError, "max_batch = 0; allowed"):
+      mpm.simulate_batch([soft], max_batch=0)
+    # The CPU's default is one scene per program.
+    self.assertEqual(mpm.simulation.default_max_batch(), 1)
 
   def test_mismatched_setups_are_rejected(self):
     a = mpm.setup(_scene("a"))
@@ -219,8 +229,9 @@ class GridWindowTest(absltest.TestCase):
 
   def test_a_batch_on_windows_equals_it_on_the_whole_grid(self):
     scenes = [_wide("a"), _wide("b", box=(0.5, 0.06, 0.62, 0.12))]
-    windowed = mpm.simulate_batch(scenes, chunk_frames=10)
-    whole = mpm.simulate_batch(scenes, chunk_frames=10, grid_window=False)
+    windowed = mpm.simulate_batch(scenes, chunk_frames=10, max_batch=2)
+    whole = mpm.simulate_batch(scenes, chunk_frames=10, grid_window=False,
+                               max_batch=2)
     for w, f in zip(windowed, whole):
       np.testing.assert_allclose(w.positions, f.positions,
                                  atol=WINDOW_TOLERANCE_M, rtol=0)
