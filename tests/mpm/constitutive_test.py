@@ -266,6 +266,23 @@ def _pressure_and_shear(tau):
   return p, np.sqrt((dev**2).sum((-2, -1)) / 2)
 
 
+def _steady_shear(rheology, shear_rate, steps, dt=1e-5):
+  """A material point sheared at a constant rate (1/s) under a constant
+  pressure (simple shear keeps the volume) for ``steps`` steps: its
+  tau_eq / p and I = shear_rate d / sqrt(p / rho_s) at the end."""
+  step = jnp.asarray([[1.0, shear_rate * dt], [0.0, 1.0]], jnp.float32)
+  f0 = jnp.eye(2, dtype=jnp.float32) * math.exp(-0.0005)
+
+  def body(_, state):
+    f, vc = state
+    return _project_mu_i(step @ f, vc, MU, LAM, rheology, dt)
+
+  f, _ = jax.jit(lambda f0: jax.lax.fori_loop(
+      0, steps, body, (f0, jnp.zeros(()))))(f0)
+  p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
+  return tau / p, shear_rate * 5e-4 / math.sqrt(p / 2650.0)
+
+
 class MuITest(parameterized.TestCase):
   """The mu(I) return map (``project_mu_i``)."""
 
@@ -323,20 +340,10 @@ class MuITest(parameterized.TestCase):
     pressure (simple shear keeps the volume) reaches tau_eq = mu(I) p with
     I = shear_rate d / sqrt(p / rho_s): the local law behind the
     Bagnold profile."""
-    dt, rheology = 1e-5, _mu_i()
-    step = jnp.asarray([[1.0, shear_rate * dt], [0.0, 1.0]], jnp.float32)
-    f0 = jnp.eye(2, dtype=jnp.float32) * math.exp(-0.0005)
-
-    def body(_, state):
-      f, vc = state
-      return _project_mu_i(step @ f, vc, MU, LAM, rheology, dt)
-
-    f, _ = jax.jit(lambda f0: jax.lax.fori_loop(
-        0, 3000, body, (f0, jnp.zeros(()))))(f0)
-    p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
-    inertial = shear_rate * 5e-4 / math.sqrt(p / 2650.0)
+    rheology = _mu_i()
+    ratio, inertial = _steady_shear(rheology, shear_rate, 3000)
     expected = float(constitutive.mu_of_i(inertial, rheology))
-    self.assertAlmostEqual(tau / p, expected, delta=0.01 * expected)
+    self.assertAlmostEqual(ratio, expected, delta=0.01 * expected)
 
   def test_gradients_finite_at_identity_on_and_inside(self):
     f = np.concatenate([
@@ -469,21 +476,11 @@ class RegularizedMuITest(parameterized.TestCase):
   @parameterized.parameters(3.0, 10.0)
   def test_steady_simple_shear_below_i_n_follows_the_regularized_law(
       self, shear_rate):
-    dt, rheology = 1e-5, _regularized()
-    step = jnp.asarray([[1.0, shear_rate * dt], [0.0, 1.0]], jnp.float32)
-    f0 = jnp.eye(2, dtype=jnp.float32) * math.exp(-0.0005)
-
-    def body(_, state):
-      f, vc = state
-      return _project_mu_i(step @ f, vc, MU, LAM, rheology, dt)
-
-    f, _ = jax.jit(lambda f0: jax.lax.fori_loop(
-        0, 4000, body, (f0, jnp.zeros(()))))(f0)
-    p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
-    inertial = shear_rate * 5e-4 / math.sqrt(p / 2650.0)
+    rheology = _regularized()
+    ratio, inertial = _steady_shear(rheology, shear_rate, 4000)
     self.assertLess(inertial, float(rheology.I_N))
     expected = float(_mu_regularized_64(inertial))
-    self.assertAlmostEqual(tau / p, expected, delta=0.01 * expected)
+    self.assertAlmostEqual(ratio, expected, delta=0.01 * expected)
 
   def test_gradients_finite_and_match_finite_differences(self):
     f = np.concatenate([
