@@ -340,7 +340,7 @@ def default_max_batch() -> int | None:
   pairs, 1.2-1.28x in threes, 1.45-1.54x in fives; docs/performance.md):
   its working set outgrows the cache and there is no per-operation
   overhead to share."""
-  return 1 if jax.default_backend() == "cpu" else None
+  return simulation.default_max_batch()
 
 
 def rollout_buckets(predictor, params, scenes: Sequence[SceneNodes],
@@ -361,21 +361,14 @@ def rollout_buckets(predictor, params, scenes: Sequence[SceneNodes],
   Returns:
     B ``Rollout``s in the order of ``scenes``.
   """
-  if max_batch is None:
-    max_batch = default_max_batch() or len(scenes)
-  if max_batch < 1:
-    raise ValueError(f"rollout_buckets: max_batch = {max_batch}; allowed: "
-                     ">= 1 or None")
-  groups = simulation.size_buckets([len(sc.types) for sc in scenes],
-                                   bucket_ratio)
   out: list[Rollout | None] = [None] * len(scenes)
-  for group in groups:
-    for start in range(0, len(group), max_batch):
-      part = group[start:start + max_batch]
-      results = rollout_batch(predictor, params, [scenes[i] for i in part],
-                              n_steps, context, spec, **kwargs)
-      for i, result in zip(part, results):
-        out[i] = result
+  for part in simulation.size_batches([len(sc.types) for sc in scenes],
+                                      bucket_ratio, max_batch,
+                                      "rollout_buckets"):
+    results = rollout_batch(predictor, params, [scenes[i] for i in part],
+                            n_steps, context, spec, **kwargs)
+    for i, result in zip(part, results):
+      out[i] = result
   return out
 
 

@@ -29,6 +29,7 @@ All functions act per particle on leading batch dimensions. Units: Pa for
 moduli and stress, radians for angles.
 """
 
+import functools
 import math
 
 import jax
@@ -187,8 +188,13 @@ class MuI:
 
 def mu_of_i(inertial_number, rheology: MuI):
   """mu(I) = mu_s + (mu_2 - mu_s) I / (I_0 + I)."""
-  return rheology.mu_s + (rheology.mu_2 - rheology.mu_s) * (
-      inertial_number / (rheology.I_0 + inertial_number))
+  return plain_mu(inertial_number, rheology.mu_s, rheology.mu_2,
+                  rheology.I_0)
+
+
+def plain_mu(inertial_number, mu_s, mu_2, i_0):
+  """``mu_of_i`` of loose parameters (numpy or jax; host-side checks)."""
+  return mu_s + (mu_2 - mu_s) * (inertial_number / (i_0 + inertial_number))
 
 
 def _regularization_log_a(rheology: MuI):
@@ -219,10 +225,13 @@ def ill_posedness(inertial_number, mu, dmu_di):
 
 
 def _plain_ill_posedness(i, mu_s, mu_2, i_0):
-  mu = mu_s + (mu_2 - mu_s) * i / (i_0 + i)
-  return ill_posedness(i, mu, (mu_2 - mu_s) * i_0 / (i_0 + i)**2)
+  return ill_posedness(i, plain_mu(i, mu_s, mu_2, i_0),
+                       (mu_2 - mu_s) * i_0 / (i_0 + i)**2)
 
 
+# Pure in its floats; each scene's setup asks again (dataset generation:
+# once per trajectory).
+@functools.lru_cache(maxsize=64)
 def regularization_threshold(mu_s: float, mu_2: float,
                              i_0: float) -> float | None:
   """I_N: the lowest inertial number at which the plain mu(I) law is

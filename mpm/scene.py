@@ -366,7 +366,7 @@ def _check_regularizable(mu_s: float, mu_2: float, i_0: float,
         f"{i_0:.3g} is ill-posed at every inertial number (Barker & Gray "
         "2017), so material.rheology = 'mu_i_regularized' has no threshold "
         f"to regularise below; allowed: {hint} (docs/physics.md, section 12)")
-  mu_n = mu_s + (mu_2 - mu_s) * i_n / (i_0 + i_n)
+  mu_n = constitutive.plain_mu(i_n, mu_s, mu_2, i_0)
   mu = np.linspace(1e-3, mu_n, 200)
   if np.any(constitutive.ill_posedness(1.0, mu, mu**3 / (2 * alpha_reg)) >
             1e-9):

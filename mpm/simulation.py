@@ -542,6 +542,21 @@ def default_max_batch() -> int | None:
   return 1 if jax.default_backend() == "cpu" else None
 
 
+def size_batches(counts: Sequence[int], ratio: float | None = BUCKET_RATIO,
+                 max_batch: int | None = None,
+                 caller: str = "size_batches") -> list[list[int]]:
+  """Indices of ``counts`` in ``size_buckets`` (``ratio`` None: one group),
+  each cut into batches of at most ``max_batch`` (None:
+  ``default_max_batch()``): the programs a batch call runs."""
+  if max_batch is not None and max_batch < 1:
+    raise ValueError(f"{caller}: max_batch = {max_batch}; allowed: >= 1 or "
+                     "None")
+  groups = (size_buckets(counts, ratio) if ratio is not None else
+            [list(range(len(counts)))])
+  size = max_batch or default_max_batch() or len(counts)
+  return [g[i:i + size] for g in groups for i in range(0, len(g), size)]
+
+
 def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
                    bucket_ratio: float | None = BUCKET_RATIO,
                    max_batch: int | None = None,
@@ -566,15 +581,8 @@ def simulate_batch(scenes: Sequence[scene_lib.Scene], *,
   """
   _check_fits(scenes, kwargs.get("chunk_frames", 50))
   setups = [setup(s) for s in scenes]
-  if bucket_ratio is None:
-    groups = [list(range(len(setups)))]
-  else:
-    groups = size_buckets([s.n_particles for s in setups], bucket_ratio)
-  if max_batch is not None and max_batch < 1:
-    raise ValueError(f"simulate_batch: max_batch = {max_batch}; allowed: "
-                     ">= 1 or None")
-  size = max_batch or default_max_batch() or len(setups)
-  groups = [g[i:i + size] for g in groups for i in range(0, len(g), size)]
+  groups = size_batches([s.n_particles for s in setups], bucket_ratio,
+                        max_batch, "simulate_batch")
   results: list[SimulationResult | None] = [None] * len(setups)
   for group in groups:
     members = [setups[i] for i in group]

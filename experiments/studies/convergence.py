@@ -3,10 +3,11 @@ paper's scenes (``python -m experiments.convergence``).
 
 A column of sand (height h0, width h0 / a for aspect ratio a) against a
 frictionless wall collapses on a flat floor (friction 0.7, friction angle 45
-deg unless ``friction_angle`` says otherwise). The normalised runout (L - L0) / L0 is measured from the furthest
-particle (the front), from the 99.5% and 90% quantiles of x (L behind which
-that fraction of the sand lies) and from the centre of mass: the front
-measures the deposit's thinnest toe, the centre its bulk.
+deg unless ``friction_angle`` says otherwise). The normalised runout
+(L - L0) / L0 is measured from the furthest particle (the front), from the
+99.5% and 90% quantiles of x (L behind which that fraction of the sand
+lies) and from the centre of mass: the front measures the deposit's
+thinnest toe, the centre its bulk.
 
 The column runs at each particle spacing (grid spacing twice it); then the
 scenes of the paper's test plan named by ``paper_scenes`` (indices) at
@@ -269,9 +270,9 @@ class Settings(settings.Base):
             "the grid, twice the spacing, 4 cells across the domain)")
       for spacing in self.spacings:
         try:
-          for rheology in self.rheologies:
-            column_scene(a, spacing, h, self.cfl, self.time, rheology,
-                         self.friction_angle)
+          # The rheologies were checked above, at this friction angle.
+          column_scene(a, spacing, h, self.cfl, self.time,
+                       friction_angle=self.friction_angle)
         except mpm.InputError as e:
           raise settings.InputError(
               f"--aspect_ratios={a:g} with --spacings={spacing:g} and "
