@@ -195,7 +195,8 @@ def project_particles(field: BoundaryField, st: transfer.Stencil,
 
 
 def window(field: BoundaryField, spec: transfer.GridSpec,
-           size: tuple[int, int], window_at: jax.Array) -> BoundaryField:
+           size: tuple[int, int], window_at: jax.Array,
+           capacity: int | None = None) -> BoundaryField:
   """The field on a window of the grid (``solver.advance_windowed``).
 
   Args:
@@ -203,6 +204,10 @@ def window(field: BoundaryField, spec: transfer.GridSpec,
     spec: the whole grid.
     size: (wx, wy) nodes of the window (static).
     window_at: int32 [2], the grid node at the window's node (0, 0).
+    capacity: None, or at least the number of the field's entries inside
+      any window of ``size`` (static; ``mpm.window.boundary_capacity``):
+      the window's field then keeps that many entries, those inside first,
+      so that the conditions cost per entry in the window, not in the grid.
 
   Returns:
     The field indexed in the window: entries outside it (and padding) point
@@ -214,13 +219,23 @@ def window(field: BoundaryField, spec: transfer.GridSpec,
   i = field.index // spec.shape[1] - window_at[0]
   j = field.index % spec.shape[1] - window_at[1]
   inside = (field.index > 0) & (i >= 0) & (i < wx) & (j >= 0) & (j < wy)
-  keep = inside.astype(field.solid_weight.dtype)
   phi = jax.lax.dynamic_slice(field.phi.reshape(spec.shape),
                               (window_at[0], window_at[1]), size).reshape(-1)
+  solid_normal, solid_weight = field.solid_normal, field.solid_weight
+  wall_normal, wall_weight = field.wall_normal, field.wall_weight
+  if capacity is not None:
+    # Each node's condition is independent of the others', so a subset of
+    # the entries in any order sets every node in the window as all do.
+    picked = jnp.nonzero(inside, size=capacity, fill_value=0)[0]
+    inside = inside[picked] & (jnp.arange(capacity) < jnp.sum(inside))
+    i, j = i[picked], j[picked]
+    solid_normal, solid_weight = solid_normal[picked], solid_weight[picked]
+    wall_normal, wall_weight = wall_normal[picked], wall_weight[picked]
+  keep = inside.astype(solid_weight.dtype)
   return BoundaryField(
       index=jnp.where(inside, i * wy + j, wx * wy).astype(jnp.int32),
-      solid_normal=field.solid_normal,
-      solid_weight=field.solid_weight * keep,
-      wall_normal=field.wall_normal,
-      wall_weight=field.wall_weight * keep[:, None],
+      solid_normal=solid_normal,
+      solid_weight=solid_weight * keep,
+      wall_normal=wall_normal,
+      wall_weight=wall_weight * keep[:, None],
       phi=jnp.concatenate([phi, phi[:1]]))

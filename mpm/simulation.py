@@ -220,11 +220,11 @@ _batched_rollout = jax.jit(
     static_argnums=(3, 4, 5))
 
 _windowed_rollout = jax.jit(solver.rollout_windowed, static_argnames=(
-    "spec", "size", "n_frames", "n_substeps"))
+    "spec", "size", "n_frames", "n_substeps", "capacity"))
 _batched_windowed_rollout = jax.jit(
     jax.vmap(solver.rollout_windowed, in_axes=(0, 0, 0, None, None, None,
-                                               None)),
-    static_argnums=(3, 4, 5, 6))
+                                               None, None)),
+    static_argnums=(3, 4, 5, 6, 7))
 
 # Compiled chunk programs by (function, static args, argument shapes).
 _compiled: dict = {}
@@ -378,6 +378,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   n_chunks, frames = chunking(first.scene.num_frames, chunk_frames)
   pick = lambda a, b: a[b] if batched else a
   compile_time = 0.0
+  boundary_index = np.asarray(field.index) if grid_window else None
 
   def rung(k, size):
     """(compiled chunk, params, per-setup speed bounds) at ladder rung k,
@@ -391,13 +392,15 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       rung_params = params.replace(
           dt=jnp.asarray(dt if batched else dt[0], jnp.float32))
       bounds = [speed_allowed(s.scene, n) for s in setups]
+    capacity = ()
     if size is None:
       fn, static = (_batched_rollout if batched else _rollout), ()
     else:
       fn = _batched_windowed_rollout if batched else _windowed_rollout
       static = (size,)
+      capacity = (window.boundary_capacity(boundary_index, first.spec, size),)
     compiled, seconds = _compile(fn, state, rung_params, field, first.spec,
-                                 *static, frames, n)
+                                 *static, frames, n, *capacity)
     compile_time += seconds
     return compiled, rung_params, bounds
 

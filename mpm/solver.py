@@ -178,7 +178,8 @@ def _spills(state: MPMState, spec: transfer.GridSpec, size: tuple[int, int],
 
 def advance_windowed(state: MPMState, params: SimParams,
                      field: boundary.BoundaryField, spec: transfer.GridSpec,
-                     size: tuple[int, int], n_substeps: int):
+                     size: tuple[int, int], n_substeps: int,
+                     capacity: int | None = None):
   """``advance`` on a window of ``size`` nodes (static) of the grid, centred
   on the sand at the frame's start: the grid work follows the sand.
 
@@ -193,7 +194,7 @@ def advance_windowed(state: MPMState, params: SimParams,
   """
   window_at = window_start(state, spec, size)
   window_spec = transfer.GridSpec(spec.dx, tuple(size), spec.origin)
-  window_field = boundary.window(field, spec, size, window_at)
+  window_field = boundary.window(field, spec, size, window_at, capacity)
 
   def body(_, carry):
     s, vmax_sq, spilled = carry
@@ -209,9 +210,11 @@ def advance_windowed(state: MPMState, params: SimParams,
 
 def rollout_windowed(state: MPMState, params: SimParams,
                      field: boundary.BoundaryField, spec: transfer.GridSpec,
-                     size: tuple[int, int], n_frames: int, n_substeps: int):
+                     size: tuple[int, int], n_frames: int, n_substeps: int,
+                     capacity: int | None = None):
   """``rollout`` with each frame on a window of ``size`` grid nodes that
-  follows the sand (``advance_windowed``).
+  follows the sand (``advance_windowed``), its boundary conditions on
+  ``capacity`` entries (``boundary.window``; None: all of the grid's).
 
   Returns:
     As ``rollout``, and spilled [T] bool: a stencil left the window during
@@ -219,7 +222,7 @@ def rollout_windowed(state: MPMState, params: SimParams,
   """
   def frame(s, _):
     s, vmax, spilled = advance_windowed(s, params, field, spec, size,
-                                        n_substeps)
+                                        n_substeps, capacity)
     return s, (s.x, vmax, jnp.all(jnp.isfinite(s.x)), spilled)
 
   state, (positions, max_speed, finite, spilled) = jax.lax.scan(

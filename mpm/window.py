@@ -70,6 +70,26 @@ def chunk_window(spec: transfer.GridSpec, extent: np.ndarray,
   return tuple(map(max, wanted, before))
 
 
+def boundary_capacity(index: np.ndarray, spec: transfer.GridSpec,
+                      size: tuple[int, int]) -> int:
+  """The most boundary entries (``BoundaryField.index`` [..., B], flat node
+  indices, 0 for padding; a leading axis of scenes takes the largest) that
+  any window of ``size`` nodes inside the grid holds: the static number a
+  windowed frame applies the conditions to (``boundary.window``)."""
+  index = np.asarray(index).reshape(-1, np.shape(index)[-1])
+  wx, wy = size
+  most = 1
+  for row in index:
+    mask = np.zeros(spec.shape, np.int64)
+    mask.flat[row[row > 0]] = 1
+    # Summed-area table: entries in every placement of the window at once.
+    table = np.pad(mask.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
+    counts = (table[wx:, wy:] - table[:-wx, wy:] - table[wx:, :-wy] +
+              table[:-wx, :-wy])
+    most = max(most, int(counts.max()))
+  return most
+
+
 def extent(state: solver.MPMState) -> np.ndarray:
   """[..., 2] the sand's bounding-box size (m), per scene."""
   x, active = np.asarray(state.x), np.asarray(state.volume) > 0

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import mpm
+from mpm import boundary
 from mpm import solver
 from mpm import window
 
@@ -283,6 +284,43 @@ class WindowedSolverTest(absltest.TestCase):
     # The sand spans 5 x 4 cells: its stencils need 8 x 7 nodes.
     small = windowed(*args, s.spec, (7, 6), 10, s.n_substeps)
     self.assertTrue(np.asarray(small[4])[0])
+
+  def test_boundary_capacity_is_the_most_entries_any_window_holds(self):
+    s = mpm.setup(_wide(obstacles=[{"shape": "rectangle", "x": 0.4,
+                                     "width": 0.06, "height": 0.05}]))
+    index = np.asarray(s.field.index)
+    rows, cols = np.divmod(index[index > 0], s.spec.shape[1])
+    for size in [(8, 8), (16, 8), (24, 16), (52, 30)]:
+      brute = max(
+          int(np.sum((rows >= a) & (rows < a + size[0]) &
+                     (cols >= b) & (cols < b + size[1])))
+          for a in range(s.spec.shape[0] - size[0] + 1)
+          for b in range(s.spec.shape[1] - size[1] + 1))
+      self.assertEqual(window.boundary_capacity(index, s.spec, size), brute)
+    self.assertEqual(window.boundary_capacity(index, s.spec, (52, 30)),
+                     len(rows))
+    # A batch of fields: the largest over its scenes.
+    self.assertEqual(window.boundary_capacity(
+        np.stack([index, np.zeros_like(index)]), s.spec, (16, 8)),
+                     window.boundary_capacity(index, s.spec, (16, 8)))
+
+  def test_a_windowed_field_on_its_capacity_sets_every_node_as_all_entries(
+      self):
+    s = mpm.setup(_wide(obstacles=[{"shape": "semicircle", "x": 0.3,
+                                     "radius": 0.04}]))
+    size = (16, 16)
+    capacity = window.boundary_capacity(s.field.index, s.spec, size)
+    self.assertLess(capacity, np.sum(np.asarray(s.field.index) > 0) / 2)
+    grid_v = jax.random.normal(jax.random.key(0), (size[0] * size[1] + 1, 2))
+    for at in [(0, 0), (10, 0), (14, 5), (36, 14)]:
+      at = jnp.asarray(at, jnp.int32)
+      every = boundary.window(s.field, s.spec, size, at)
+      some = boundary.window(s.field, s.spec, size, at, capacity)
+      self.assertEqual(some.index.shape, (capacity,))
+      apply = lambda f: boundary.apply(f, grid_v, 0.4, 0.2)[:-1]
+      np.testing.assert_array_equal(apply(some), apply(every))
+      # Something was set: the window holds boundary nodes that act.
+      self.assertGreater(np.abs(apply(every) - grid_v[:-1]).max(), 0.0)
 
 
 class RestTest(absltest.TestCase):
