@@ -6,7 +6,6 @@ stay pure in ``mpm.solver``. Shapes: N particles, Nb boundary particles,
 T frames, B scenes in a batch.
 """
 
-import collections
 import dataclasses
 import math
 import time
@@ -227,25 +226,28 @@ _batched_windowed_rollout = jax.jit(
                                                None, None)),
     static_argnums=(3, 4, 5, 6, 7))
 
-# Compiled chunk programs by (function, static args, argument shapes), the
-# most recently used kept: a study of many scenes and spacings compiles
-# hundreds, and each holds memory maps of its own, which XLA:CPU runs out of
-# (a study crashed so, 2026-11-26).
-_compiled: collections.OrderedDict = collections.OrderedDict()
-MAX_COMPILED = 48
+# Compiled chunk programs by (function, static args, argument shapes). A
+# study of many scenes and spacings compiles hundreds, and every program
+# jax has compiled keeps memory maps of its own, which XLA:CPU runs out of
+# (the speed/accuracy study crashed so, 2026-11-26); dropping ours does not
+# free them, jax's caches hold them too. So past MAX_COMPILED programs all
+# are dropped, jax's included (``jax.clear_caches``; with the entry points'
+# persistent compilation cache a recompile is a read from disk).
+_compiled: dict = {}
+MAX_COMPILED = 64
 
 
 def _compile(fn, *args):
   key = (id(fn), args[3:], jax.tree.structure(args[:3]),
          tuple((a.shape, a.dtype) for a in jax.tree.leaves(args[:3])))
   if key in _compiled:
-    _compiled.move_to_end(key)
     return _compiled[key], 0.0
+  if len(_compiled) >= MAX_COMPILED:
+    _compiled.clear()
+    jax.clear_caches()
   start = time.perf_counter()
   compiled = fn.lower(*args).compile()
   _compiled[key] = compiled
-  while len(_compiled) > MAX_COMPILED:
-    _compiled.popitem(last=False)
   return compiled, time.perf_counter() - start
 
 

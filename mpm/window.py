@@ -24,9 +24,9 @@ WINDOW_MAX_FRACTION = 0.6
 # substep of 2026-11-26: 1.14x slower at 5.5 thousand nodes, 0.92x at 8.9,
 # 0.82x at 20 thousand; before it the crossover was near 40 thousand).
 WINDOW_MIN_NODES = 8_000
-# Boundary capacities are rounded up to a multiple of this, so that scenes
-# alike share their compiled programs.
-CAPACITY_STEP = 64
+# Boundary capacities are rounded up to a power of two, at least this, so
+# that the scenes of a study or a dataset share a few compiled programs.
+CAPACITY_MIN = 64
 
 
 def window_size(spec: transfer.GridSpec, extent: np.ndarray,
@@ -73,16 +73,14 @@ def chunk_window(spec: transfer.GridSpec, extent: np.ndarray,
   return tuple(map(max, wanted, before))
 
 
-def boundary_capacity(index: np.ndarray, spec: transfer.GridSpec,
-                      size: tuple[int, int]) -> int:
+def boundary_count(index: np.ndarray, spec: transfer.GridSpec,
+                   size: tuple[int, int]) -> int:
   """The most boundary entries (``BoundaryField.index`` [..., B], flat node
   indices, 0 for padding; a leading axis of scenes takes the largest) that
-  any window of ``size`` nodes inside the grid holds, rounded up to
-  ``CAPACITY_STEP`` (at most B): the static number a windowed frame applies
-  the conditions to (``boundary.window``)."""
+  any window of ``size`` nodes inside the grid holds."""
   index = np.asarray(index).reshape(-1, np.shape(index)[-1])
   wx, wy = size
-  most = 1
+  most = 0
   for row in index:
     mask = np.zeros(spec.shape, np.int64)
     mask.flat[row[row > 0]] = 1
@@ -91,7 +89,17 @@ def boundary_capacity(index: np.ndarray, spec: transfer.GridSpec,
     counts = (table[wx:, wy:] - table[:-wx, wy:] - table[wx:, :-wy] +
               table[:-wx, :-wy])
     most = max(most, int(counts.max()))
-  return min(index.shape[-1], -(-most // CAPACITY_STEP) * CAPACITY_STEP)
+  return most
+
+
+def boundary_capacity(index: np.ndarray, spec: transfer.GridSpec,
+                      size: tuple[int, int]) -> int:
+  """``boundary_count`` rounded up to a power of two, at least
+  ``CAPACITY_MIN``, at most B: the static number of entries a windowed
+  frame applies the conditions to (``boundary.window``)."""
+  most = boundary_count(index, spec, size)
+  return min(np.shape(index)[-1],
+             max(CAPACITY_MIN, 1 << max(most - 1, 0).bit_length()))
 
 
 def extent(state: solver.MPMState) -> np.ndarray:

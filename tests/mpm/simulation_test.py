@@ -53,6 +53,17 @@ class SimulateTest(parameterized.TestCase):
     # Falling sand: the largest speed grows like g t until it lands.
     self.assertGreater(result.max_speed[3], result.max_speed[1])
 
+  def test_past_the_programs_kept_all_are_dropped_and_runs_stay_equal(self):
+    scenes = [_scene("a"), _scene("b", solver={"dx": 0.015, "cfl": 0.4})]
+    first = [mpm.simulate(s, chunk_frames=4) for s in scenes]
+    with mock.patch.object(mpm.simulation, "MAX_COMPILED", 1), \
+        mock.patch.dict(mpm.simulation._compiled, clear=True):
+      again = [mpm.simulate(s, chunk_frames=4) for s in scenes]
+      self.assertLen(mpm.simulation._compiled, 1)
+    for f, a in zip(first, again):
+      np.testing.assert_array_equal(a.positions, f.positions)
+    self.assertGreater(again[0].compile_time_s, 0.0)   # compiled anew
+
   def test_chunking_does_not_change_the_trajectory(self):
     scene = _scene()
     whole = mpm.simulate(scene)
@@ -290,22 +301,23 @@ class WindowedSolverTest(absltest.TestCase):
                                      "width": 0.06, "height": 0.05}]))
     index = np.asarray(s.field.index)
     rows, cols = np.divmod(index[index > 0], s.spec.shape[1])
-    step = window.CAPACITY_STEP
     for size in [(8, 8), (16, 8), (24, 16), (52, 30)]:
       brute = max(
           int(np.sum((rows >= a) & (rows < a + size[0]) &
                      (cols >= b) & (cols < b + size[1])))
           for a in range(s.spec.shape[0] - size[0] + 1)
           for b in range(s.spec.shape[1] - size[1] + 1))
-      with mock.patch.object(window, "CAPACITY_STEP", 1):
-        self.assertEqual(window.boundary_capacity(index, s.spec, size), brute)
-      # Rounded up to the step, so that scenes alike share programs.
-      self.assertEqual(window.boundary_capacity(index, s.spec, size),
-                       min(len(index), -(-brute // step) * step))
+      self.assertEqual(window.boundary_count(index, s.spec, size), brute)
+      # Rounded up to a power of two, so that scenes share programs.
+      capacity = window.boundary_capacity(index, s.spec, size)
+      self.assertEqual(capacity, min(len(index), max(
+          window.CAPACITY_MIN, 2**int(np.ceil(np.log2(brute))))))
+    self.assertEqual(window.boundary_count(index, s.spec, (52, 30)),
+                     len(rows))
     # A batch of fields: the largest over its scenes.
-    self.assertEqual(window.boundary_capacity(
+    self.assertEqual(window.boundary_count(
         np.stack([index, np.zeros_like(index)]), s.spec, (16, 8)),
-                     window.boundary_capacity(index, s.spec, (16, 8)))
+                     window.boundary_count(index, s.spec, (16, 8)))
 
   def test_a_windowed_field_on_its_capacity_sets_every_node_as_all_entries(
       self):
