@@ -484,13 +484,14 @@ class SlopeTest(parameterized.TestCase):
     x = np.asarray(positions)[-2:, :s.n_particles]
     return float(np.linalg.norm(x[1] - x[0], axis=-1).mean() / 0.01)
 
-  @parameterized.product(theta_deg=(15.0, 25.0),
-                         rheology=("drucker_prager", "mu_i"))
+  @parameterized.product(
+      theta_deg=(15.0, 25.0),
+      rheology=("drucker_prager", "mu_i", "mu_i_compressible"))
   def test_below_mu_s_the_slope_rests(self, theta_deg, rheology):
     # What is left is elastic settling, millimetres per second.
     self.assertLess(self._end_speed(theta_deg, rheology), 0.01)
 
-  @parameterized.parameters("drucker_prager", "mu_i")
+  @parameterized.parameters("drucker_prager", "mu_i", "mu_i_compressible")
   def test_above_mu_2_the_slope_flows(self, rheology):
     self.assertGreater(self._end_speed(45.0, rheology), 0.05)
 
@@ -501,6 +502,52 @@ class SlopeTest(parameterized.TestCase):
     35 deg, has no well-posed range to regularise below.)"""
     self.assertLess(self._end_speed(15.0, "mu_i_regularized", 22.5), 0.01)
     self.assertGreater(self._end_speed(45.0, "mu_i_regularized", 22.5), 0.05)
+
+
+class CompressibleTest(absltest.TestCase):
+  """The compressible mu(I) in a scene: a column collapsing on a floor."""
+
+  def _run(self, **material):
+    d = _flat_scene(0.3, 0.2, (0.02, FLOOR + 1e-4, 0.08, FLOOR + 0.06),
+                    0.005, 0.01, boundary_friction=0.7, num_frames=31,
+                    frame_dt=0.01).to_dict()
+    d["material"].update(rheology="mu_i_compressible", **material)
+    s = mpm.setup(mpm.Scene.from_dict(d))
+    final, positions, _, finite = _ROLLOUT(s.state, s.params, s.field,
+                                           s.spec, 30, s.n_substeps)
+    self.assertTrue(np.all(finite))
+    return s, final, np.asarray(positions)
+
+  def test_volume_fraction_stays_physical_and_masses_fixed(self):
+    s, final, positions = self._run()
+    n = s.n_particles
+    phi = np.asarray(final.volume_fraction)
+    np.testing.assert_allclose(s.state.volume_fraction, 1500.0 / 2650.0)
+    self.assertTrue(np.all((phi > 0) & (phi <= 1)))
+    # The flowing sand's phi moved (the check is not vacuous) but its bulk
+    # stays near the packing it started at.
+    self.assertGreater(np.abs(phi[:n] - 1500.0 / 2650.0).max(), 1e-3)
+    self.assertBetween(float(np.median(phi[:n])), 0.5, 0.62)
+    np.testing.assert_array_equal(final.volume, s.state.volume)
+    # Padding particles keep theirs.
+    np.testing.assert_array_equal(phi[n:], s.state.volume_fraction[n:])
+    self.assertGreater(np.abs(positions[-1, :n, 0] - s.state.x[:n, 0]).max(),
+                       0.01)
+
+  def test_without_dilatancy_the_run_is_mu_i(self):
+    """K = 0: the positions of mu(I)'s run, within float32 rounding (the two
+    programs are fused differently; section 12 of docs/physics.md)."""
+    _, _, compressible = self._run(dilatancy=0.0)
+    d = _flat_scene(0.3, 0.2, (0.02, FLOOR + 1e-4, 0.08, FLOOR + 0.06),
+                    0.005, 0.01, boundary_friction=0.7, num_frames=31,
+                    frame_dt=0.01).to_dict()
+    d["material"]["rheology"] = "mu_i"
+    s = mpm.setup(mpm.Scene.from_dict(d))
+    self.assertIsNone(s.state.volume_fraction)
+    _, plain, _, _ = _ROLLOUT(s.state, s.params, s.field, s.spec, 30,
+                              s.n_substeps)
+    np.testing.assert_allclose(compressible, np.asarray(plain), rtol=0,
+                               atol=1e-4)
 
 
 if __name__ == "__main__":
