@@ -131,10 +131,10 @@ class Material:
     alpha_reg: with "mu_i_regularized" (mu(I) with Barker & Gray 2017's
       partial regularisation below the inertial number where the plain law
       turns ill-posed), the exponent of its low-I branch; None otherwise.
-    phi_max, phi_min, dilatancy: with "mu_i_compressible" (mu(I) with a
-      volume fraction phi relaxing toward phi_eq(I) = phi_max - (phi_max -
-      phi_min) I through the dilatancy tan(psi) = dilatancy (phi -
-      phi_eq)); None otherwise. phi starts at density / grain_density.
+    phi_max, phi_min, dilatancy, phi_0: with "mu_i_compressible" (mu(I)
+      with a volume fraction phi, starting at phi_0, relaxing toward
+      phi_eq(I) = phi_max - (phi_max - phi_min) I through the dilatancy
+      tan(psi) = dilatancy (phi - phi_eq)); None otherwise.
   """
   density: float = 1538.0            # kg / m^3
   youngs_modulus: float = 3.537e5    # Pa
@@ -150,13 +150,7 @@ class Material:
   phi_max: float | None = None
   phi_min: float | None = None
   dilatancy: float | None = None
-
-  @property
-  def phi_0(self) -> float | None:
-    """The compressible law's initial volume fraction, density /
-    grain_density (the bulk is grains and voids); None for the others."""
-    return (None if self.dilatancy is None else
-            self.density / self.grain_density)
+  phi_0: float | None = None
 
   def to_dict(self) -> dict[str, Any]:
     """The JSON form; the mu(I) keys only with that rheology (so the
@@ -178,7 +172,7 @@ RHEOLOGIES = {
                          "grain_density", "alpha_reg"),
     "mu_i_compressible": ("mu_s", "mu_2", "I_0", "grain_diameter",
                           "grain_density", "phi_max", "phi_min",
-                          "dilatancy"),
+                          "dilatancy", "phi_0"),
 }
 RHEOLOGY_KEYS = tuple(dict.fromkeys(k for keys in RHEOLOGIES.values()
                                     for k in keys))
@@ -378,8 +372,12 @@ def _parse_rheology(md: Mapping[str, Any], density: float,
       raise InputError(f"material.phi_min = {phi_min:g} is not below "
                        f"material.phi_max = {phi_max:g}; allowed: 0 < phi_min "
                        "< phi_max < 1 (sand dilates as it flows faster)")
+    # By default the sand starts at phi_eq(0), the critical state at rest:
+    # there the same sand as mu(I)'s (a denser start is stronger).
     out.update(phi_max=phi_max, phi_min=phi_min, dilatancy=_number(
-        md, "dilatancy", MU_I_DILATANCY, "material", 0, 100))
+        md, "dilatancy", MU_I_DILATANCY, "material", 0, 100),
+               phi_0=_number(md, "phi_0", phi_max, "material", 0, 1, True,
+                             True))
   return out
 
 

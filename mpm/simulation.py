@@ -128,7 +128,7 @@ def _mu_i(m: scene_lib.Material) -> constitutive.MuI:
   """``MuI`` of the material's keys (``scene.RHEOLOGIES``), and the
   regularised rheology's threshold I_N."""
   f32 = {k: jnp.asarray(getattr(m, k), jnp.float32)
-         for k in scene_lib.RHEOLOGIES[m.rheology]}
+         for k in scene_lib.RHEOLOGIES[m.rheology] if k != "phi_0"}
   if m.rheology == "mu_i_regularized":
     f32["I_N"] = jnp.asarray(constitutive.regularization_threshold(
         m.mu_s, m.mu_2, m.I_0), jnp.float32)

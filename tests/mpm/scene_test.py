@@ -199,6 +199,10 @@ def _invalid_cases():
            d=_with(material__rheology="mu_i_compressible",
                    material__phi_max=1.0),
            key="material.phi_max", allowed="allowed: (0, 1)"),
+      dict(testcase_name="phi_0_of_zero",
+           d=_with(material__rheology="mu_i_compressible",
+                   material__phi_0=0.0),
+           key="material.phi_0", allowed="allowed: (0, 1)"),
       dict(testcase_name="negative_dilatancy",
            d=_with(material__rheology="mu_i_compressible",
                    material__dilatancy=-1.0),
@@ -325,8 +329,8 @@ class RoundTripTest(parameterized.TestCase):
     d = _with(material__rheology="mu_i_compressible")
     m = mpm.Scene.from_dict(d).material
     self.assertEqual((m.phi_max, m.phi_min, m.dilatancy), (0.6, 0.4, 4.09))
-    # The sand starts at the volume fraction its bulk density says.
-    self.assertAlmostEqual(m.phi_0, m.density / 2650.0)
+    # The sand starts at the critical state at rest, phi_eq(0).
+    self.assertEqual(m.phi_0, 0.6)
     self.assertIn("phi_max", mpm.Scene.from_dict(d).to_dict()["material"])
 
   @parameterized.named_parameters(
@@ -353,7 +357,7 @@ class RoundTripTest(parameterized.TestCase):
                                          "mu_s": 0.38, "alpha_reg": 1.5}}),
       ("mu_i_compressible", {"material": {
           "rheology": "mu_i_compressible", "phi_max": 0.62, "phi_min": 0.5,
-          "dilatancy": 2.0, "density": 1600}}),
+          "dilatancy": 2.0, "phi_0": 0.55}}),
   )
   def test_dict_and_json(self, d):
     scene = mpm.Scene.from_dict(d)

@@ -522,11 +522,11 @@ class CompressibleTest(absltest.TestCase):
     s, final, positions = self._run()
     n = s.n_particles
     phi = np.asarray(final.volume_fraction)
-    np.testing.assert_allclose(s.state.volume_fraction, 1500.0 / 2650.0)
+    np.testing.assert_allclose(s.state.volume_fraction, 0.6)
     self.assertTrue(np.all((phi > 0) & (phi <= 1)))
     # The flowing sand's phi moved (the check is not vacuous) but its bulk
     # stays near the packing it started at.
-    self.assertGreater(np.abs(phi[:n] - 1500.0 / 2650.0).max(), 1e-3)
+    self.assertGreater(np.abs(phi[:n] - 0.6).max(), 1e-3)
     self.assertBetween(float(np.median(phi[:n])), 0.5, 0.62)
     np.testing.assert_array_equal(final.volume, s.state.volume)
     # Padding particles keep theirs.
