@@ -174,9 +174,10 @@ class MuI:
     I_N, alpha_reg: [] the regularisation's threshold (the lower end of the
       range where the plain law is well-posed, ``regularization_threshold``)
       and exponent; None for the plain law (a change of program structure).
-    phi_max, phi_min, dilatancy: [] the compressible law's volume fractions
-      of the dilatancy law ``phi_eq`` and its dilatancy coefficient K;
-      None for the incompressible laws.
+    phi_max, phi_min, dilatancy: [] the compressible law's dilatancy law
+      phi_eq(I) = phi_max - (phi_max - phi_min) I (the volume fraction of
+      steady flow) and its K of tan psi = K (phi - phi_eq(I)); None for the
+      incompressible laws.
   """
   mu_s: jax.Array
   mu_2: jax.Array
@@ -187,9 +188,7 @@ class MuI:
   # law: below I_N, mu = sqrt(alpha_reg / ln(A / I)) (``mu_regularized``).
   I_N: jax.Array | None = None  # pylint: disable=invalid-name
   alpha_reg: jax.Array | None = None
-  # The compressible law (``project_mu_i`` with a volume fraction), or None:
-  # phi_eq(I) = phi_max - (phi_max - phi_min) I, and the dilatancy K of
-  # tan(psi) = K (phi - phi_eq(I)).
+  # The compressible law (``project_mu_i`` with a volume fraction), or None.
   phi_max: jax.Array | None = None
   phi_min: jax.Array | None = None
   dilatancy: jax.Array | None = None
@@ -204,13 +203,6 @@ def mu_of_i(inertial_number, rheology: MuI):
 def plain_mu(inertial_number, mu_s, mu_2, i_0):
   """``mu_of_i`` of loose parameters (numpy or jax; host-side checks)."""
   return mu_s + (mu_2 - mu_s) * (inertial_number / (i_0 + inertial_number))
-
-
-def phi_eq(inertial_number, rheology: MuI):
-  """The volume fraction of steady flow at I: phi_max - (phi_max - phi_min)
-  I, linear as in GDR MiDi (2004) and Heyman et al. (2017)."""
-  return rheology.phi_max - (rheology.phi_max - rheology.phi_min) * (
-      inertial_number)
 
 
 def advect_volume_fraction(phi, velocity_gradient, dt):

@@ -374,10 +374,11 @@ def _parse_rheology(md: Mapping[str, Any], density: float,
                        "< phi_max < 1 (sand dilates as it flows faster)")
     # By default the sand starts at phi_eq(0), the critical state at rest:
     # there the same sand as mu(I)'s (a denser start is stronger).
-    out.update(phi_max=phi_max, phi_min=phi_min, dilatancy=_number(
-        md, "dilatancy", MU_I_DILATANCY, "material", 0, 100),
-               phi_0=_number(md, "phi_0", phi_max, "material", 0, 1, True,
-                             True))
+    out.update(
+        phi_max=phi_max, phi_min=phi_min,
+        dilatancy=_number(md, "dilatancy", MU_I_DILATANCY, "material", 0,
+                          100),
+        phi_0=_number(md, "phi_0", phi_max, "material", 0, 1, True, True))
   return out
 
 

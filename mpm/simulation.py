@@ -125,8 +125,8 @@ def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
 
 
 def _mu_i(m: scene_lib.Material) -> constitutive.MuI:
-  """``MuI`` of the material's keys (``scene.RHEOLOGIES``), and the
-  regularised rheology's threshold I_N."""
+  """``MuI`` of the material's keys (``scene.RHEOLOGIES``; phi_0 is the
+  state's), and the regularised rheology's threshold I_N."""
   f32 = {k: jnp.asarray(getattr(m, k), jnp.float32)
          for k in scene_lib.RHEOLOGIES[m.rheology] if k != "phi_0"}
   if m.rheology == "mu_i_regularized":
