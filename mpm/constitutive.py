@@ -174,6 +174,10 @@ class MuI:
     I_N, alpha_reg: [] the regularisation's threshold (the lower end of the
       range where the plain law is well-posed, ``regularization_threshold``)
       and exponent; None for the plain law (a change of program structure).
+    phi_max, phi_min, dilatancy: [] the compressible law's dilatancy law
+      phi_eq(I) = phi_max - (phi_max - phi_min) I (the volume fraction of
+      steady flow) and its K of tan psi = K (phi - phi_eq(I)); None for the
+      incompressible laws.
   """
   mu_s: jax.Array
   mu_2: jax.Array
@@ -184,6 +188,10 @@ class MuI:
   # law: below I_N, mu = sqrt(alpha_reg / ln(A / I)) (``mu_regularized``).
   I_N: jax.Array | None = None  # pylint: disable=invalid-name
   alpha_reg: jax.Array | None = None
+  # The compressible law (``project_mu_i`` with a volume fraction), or None.
+  phi_max: jax.Array | None = None
+  phi_min: jax.Array | None = None
+  dilatancy: jax.Array | None = None
 
 
 def mu_of_i(inertial_number, rheology: MuI):
@@ -195,6 +203,15 @@ def mu_of_i(inertial_number, rheology: MuI):
 def plain_mu(inertial_number, mu_s, mu_2, i_0):
   """``mu_of_i`` of loose parameters (numpy or jax; host-side checks)."""
   return mu_s + (mu_2 - mu_s) * (inertial_number / (i_0 + inertial_number))
+
+
+def advect_volume_fraction(phi, velocity_gradient, dt):
+  """phi [N] after a substep of the velocity gradient [N, 2, 2] (1/s): the
+  grains' volume is conserved, so phi / det(I + dt L), kept in [0, 1]."""
+  g = velocity_gradient * dt
+  jacobian = (1 + g[..., 0, 0]) * (1 + g[..., 1, 1]) - g[..., 0, 1] * g[
+      ..., 1, 0]
+  return jnp.clip(phi / jnp.maximum(jacobian, 1e-6), 0.0, 1.0)
 
 
 def _regularization_log_a(rheology: MuI):
@@ -254,19 +271,31 @@ def regularization_threshold(mu_s: float, mu_2: float,
   return float(hi)
 
 
-def _quadratic_drop(tau_trial, p, c, rheology: MuI, yielding):
+def _quadratic_drop(tau_trial, p, c, rheology: MuI, yielding, mu_s=None,
+                    slope=None):
   """The plain law's return: the drop y = tau_trial - tau of a yielding
-  state, the positive root of the quadratic of ``project_mu_i``."""
+  state, the positive root of the quadratic of ``project_mu_i``.
+
+  With ``mu_s`` [...] and ``slope`` [] given, the friction is
+  mu_s + (mu_2 - mu_s) I / (I_0 + I) + slope I (the compressible law's,
+  mu(I) + tan psi): the quadratic's leading coefficient becomes
+  c (1 + slope c p) and its linear one gains slope c p I_0.
+  """
   # Safe values where it does not yield keep both branches' gradients
   # finite.
   p = jnp.where(yielding, p, 1.0)
   c = jnp.where(yielding, c, 1.0)
-  s = jnp.where(yielding, tau_trial - rheology.mu_s * p, 1.0)
+  s = jnp.where(yielding, tau_trial - (rheology.mu_s if mu_s is None else
+                                       mu_s) * p, 1.0)
   b = rheology.I_0 + c * ((rheology.mu_2 - rheology.mu_s) * p - s)
-  root = jnp.sqrt(b * b + 4 * c * s * rheology.I_0)
+  a = c
+  if slope is not None:
+    a = c * (1 + slope * c * p)
+    b = b + slope * c * p * rheology.I_0
+  root = jnp.sqrt(b * b + 4 * a * s * rheology.I_0)
   # The positive root, each form free of cancellation on its side.
   return jnp.where(b >= 0, 2 * s * rheology.I_0 / (b + root),
-                   (root - b) / (2 * c))
+                   (root - b) / (2 * a))
 
 
 # Newton steps of the regularised return: monotone from below (see
@@ -317,7 +346,8 @@ def _regularized_drop(tau_trial, p, c, rheology: MuI, low):
   return jnp.exp(log_a - w) / c
 
 
-def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
+def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt,
+                 volume_fraction=None):
   """The mu(I) return mapping: explicit, one quadratic per yielding
   particle (as Dunatunga & Kamrin 2015; ``PlasticModel::DPMui`` of the MPM
   code larsblatny/matter).
@@ -340,9 +370,19 @@ def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
   with shear yields: where the return lands at I >= I_N it is the
   quadratic's, below it ``_regularized_drop``'s (a few Newton steps).
 
+  The compressible law (``rheology.dilatancy`` set; after Heyman et al.
+  2017, with the dilatancy of Roux & Radjai 1998 and Pailha & Pouliquen
+  2009) takes the volume fraction phi: the friction is mu(I) + tan psi,
+  tan psi = K (phi - phi_eq(I)), still one quadratic (phi_eq is linear in
+  I), and the flow is non-associated: the plastic shear y / mu comes with
+  a plastic log volume change tan(psi) y / mu, taken from the elastic
+  volume (dense sand dilates, its pressure rises; loose sand compacts).
+  With K = 0 it is the plain return.
+
   Args:
     F, volume_correction, mu, lam: as ``project``.
     rheology: the parameters; dt: the substep (s).
+    volume_fraction: [...] phi, with the compressible law only.
 
   Returns:
     (F, volume_correction) after projection, same shapes.
@@ -357,7 +397,24 @@ def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
   p_safe = jnp.where(compressed, p, 1.0)
   c = rheology.grain_diameter / (
       mu * dt * jnp.sqrt(p_safe / rheology.grain_density))
-  if rheology.I_N is None:
+  dilation = None
+  if rheology.dilatancy is not None:
+    # mu(I) + tan psi, tan psi = K (phi - phi_eq(I)): a part at rest,
+    # mu_s + K (phi - phi_max) (kept >= 0: no negative friction however
+    # loose), and a slope K (phi_max - phi_min) in I.
+    k = rheology.dilatancy
+    slope = k * (rheology.phi_max - rheology.phi_min)
+    mu_rest = jnp.maximum(
+        rheology.mu_s + k * (volume_fraction - rheology.phi_max), 0.0)
+    yielding = jnp.logical_and(compressed, tau_trial > mu_rest * p)
+    drop = _quadratic_drop(tau_trial, p, c, rheology, yielding, mu_rest,
+                           slope)
+    # The plastic volume change tan(psi) times the plastic shear drop / mu,
+    # at the return's I = c y; a compaction releases at most the pressure.
+    tan_psi = mu_rest - rheology.mu_s + slope * (c * drop)
+    dilation = jnp.where(yielding, jnp.maximum(tan_psi * drop / mu, trace_c),
+                         0.0)
+  elif rheology.I_N is None:
     yielding = jnp.logical_and(compressed, tau_trial > rheology.mu_s * p)
     drop = _quadratic_drop(tau_trial, p, c, rheology, yielding)
   else:
@@ -371,7 +428,12 @@ def project_mu_i(F, volume_correction, mu, lam, rheology: MuI, dt):
     drop = jnp.where(upper, _quadratic_drop(tau_trial, p, c, rheology, upper),
                      _regularized_drop(tau_trial, p, c, rheology, low))
   delta_gamma = jnp.where(yielding, drop / (_SQRT2 * mu), 0.0)
-  return _return_map(F, trace_c, dev, dev_norm, delta_gamma)
+  F, volume_correction = _return_map(F, trace_c, dev, dev_norm, delta_gamma)
+  if dilation is not None:
+    # The elastic log volume loses what the plastic flow gains: a dilating
+    # sample's pressure rises until it expands, a compacting one's falls.
+    F = F * jnp.exp(-dilation / 2)[..., None, None]
+  return F, volume_correction
 
 
 def project_principal(F, volume_correction, mu, lam, alpha):

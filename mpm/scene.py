@@ -131,6 +131,10 @@ class Material:
     alpha_reg: with "mu_i_regularized" (mu(I) with Barker & Gray 2017's
       partial regularisation below the inertial number where the plain law
       turns ill-posed), the exponent of its low-I branch; None otherwise.
+    phi_max, phi_min, dilatancy, phi_0: with "mu_i_compressible" (mu(I)
+      with a volume fraction phi, starting at phi_0, relaxing toward
+      phi_eq(I) = phi_max - (phi_max - phi_min) I through the dilatancy
+      tan(psi) = dilatancy (phi - phi_eq)); None otherwise.
   """
   density: float = 1538.0            # kg / m^3
   youngs_modulus: float = 3.537e5    # Pa
@@ -143,6 +147,10 @@ class Material:
   grain_diameter: float | None = None
   grain_density: float | None = None
   alpha_reg: float | None = None
+  phi_max: float | None = None
+  phi_min: float | None = None
+  dilatancy: float | None = None
+  phi_0: float | None = None
 
   def to_dict(self) -> dict[str, Any]:
     """The JSON form; the mu(I) keys only with that rheology (so the
@@ -162,6 +170,9 @@ RHEOLOGIES = {
     "mu_i": ("mu_s", "mu_2", "I_0", "grain_diameter", "grain_density"),
     "mu_i_regularized": ("mu_s", "mu_2", "I_0", "grain_diameter",
                          "grain_density", "alpha_reg"),
+    "mu_i_compressible": ("mu_s", "mu_2", "I_0", "grain_diameter",
+                          "grain_density", "phi_max", "phi_min",
+                          "dilatancy", "phi_0"),
 }
 RHEOLOGY_KEYS = tuple(dict.fromkeys(k for keys in RHEOLOGIES.values()
                                     for k in keys))
@@ -173,6 +184,11 @@ MU_I_GRAIN_DIAMETER = 0.0005  # m
 MU_I_GRAIN_DENSITY = 2650.0   # kg / m^3
 # Barker & Gray (2017)'s exponent of the regularised low-I branch.
 MU_I_ALPHA_REG = 1.9
+# The compressible law's dilatancy law phi_eq(I) (glass beads, as commonly
+# quoted) and Pailha & Pouliquen (2009)'s K of tan psi = K (phi - phi_eq).
+MU_I_PHI_MAX = 0.6
+MU_I_PHI_MIN = 0.4
+MU_I_DILATANCY = 4.09
 
 
 @dataclasses.dataclass(frozen=True)
@@ -347,6 +363,22 @@ def _parse_rheology(md: Mapping[str, Any], density: float,
     out["alpha_reg"] = _number(md, "alpha_reg", MU_I_ALPHA_REG, "material",
                                0, 10, lo_open=True)
     _check_regularizable(mu_s, mu_2, out["I_0"], out["alpha_reg"])
+  if rheology == "mu_i_compressible":
+    phi_max = _number(md, "phi_max", MU_I_PHI_MAX, "material", 0, 1, True,
+                      True)
+    phi_min = _number(md, "phi_min", MU_I_PHI_MIN, "material", 0, 1, True,
+                      True)
+    if phi_min >= phi_max:
+      raise InputError(f"material.phi_min = {phi_min:g} is not below "
+                       f"material.phi_max = {phi_max:g}; allowed: 0 < phi_min "
+                       "< phi_max < 1 (sand dilates as it flows faster)")
+    # By default the sand starts at phi_eq(0), the critical state at rest:
+    # there the same sand as mu(I)'s (a denser start is stronger).
+    out.update(
+        phi_max=phi_max, phi_min=phi_min,
+        dilatancy=_number(md, "dilatancy", MU_I_DILATANCY, "material", 0,
+                          100),
+        phi_0=_number(md, "phi_0", phi_max, "material", 0, 1, True, True))
   return out
 
 

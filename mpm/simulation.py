@@ -121,19 +121,18 @@ def sim_params(scene: scene_lib.Scene, dt: float) -> solver.SimParams:
       boundary_friction=f32(scene.boundary_friction),
       wall_friction=f32(scene.wall_friction), gravity=f32([0.0, -GRAVITY]),
       dt=f32(dt), domain=f32([scene.domain.width, scene.domain.height]),
-      mu_i=None if m.rheology == "drucker_prager" else constitutive.MuI(
-          mu_s=f32(m.mu_s), mu_2=f32(m.mu_2), I_0=f32(m.I_0),
-          grain_diameter=f32(m.grain_diameter),
-          grain_density=f32(m.grain_density), **_regularization(m)))
+      mu_i=None if m.rheology == "drucker_prager" else _mu_i(m))
 
 
-def _regularization(m: scene_lib.Material) -> dict[str, jax.Array]:
-  """``MuI``'s I_N and alpha_reg for the regularised rheology, else none."""
-  if m.rheology != "mu_i_regularized":
-    return {}
-  i_n = constitutive.regularization_threshold(m.mu_s, m.mu_2, m.I_0)
-  return {"I_N": jnp.asarray(i_n, jnp.float32),
-          "alpha_reg": jnp.asarray(m.alpha_reg, jnp.float32)}
+def _mu_i(m: scene_lib.Material) -> constitutive.MuI:
+  """``MuI`` of the material's keys (``scene.RHEOLOGIES``; phi_0 is the
+  state's), and the regularised rheology's threshold I_N."""
+  f32 = {k: jnp.asarray(getattr(m, k), jnp.float32)
+         for k in scene_lib.RHEOLOGIES[m.rheology] if k != "phi_0"}
+  if m.rheology == "mu_i_regularized":
+    f32["I_N"] = jnp.asarray(constitutive.regularization_threshold(
+        m.mu_s, m.mu_2, m.I_0), jnp.float32)
+  return constitutive.MuI(**f32)
 
 
 def _bucket(n: int, multiple: int) -> int:
@@ -177,7 +176,8 @@ def setup(scene: scene_lib.Scene, x0: np.ndarray | None = None, *,
   volume = np.zeros(padded, np.float32)
   volume[:n] = scene.granular.spacing**2
   x0 = np.concatenate([x0, np.repeat(x0[:1], padded - n, 0)])
-  state = solver.init_state(jnp.asarray(x0), jnp.asarray(volume))
+  state = solver.init_state(jnp.asarray(x0), jnp.asarray(volume),
+                            scene.material.phi_0)
   bpos, btype = geometry.boundary_particles(scene)
   return Setup(scene, spec, n_substeps, vmax, state,
                sim_params(scene, scene.frame_dt / n_substeps), field, bpos,
@@ -307,7 +307,8 @@ def pad_setup(s: Setup, n_particles: int, n_nodes: int) -> Setup:
   state = solver.MPMState(
       x=edge(st.x, k), v=zeros(st.v, k), C=zeros(st.C, k), F=edge(st.F, k),
       volume_correction=zeros(st.volume_correction, k),
-      volume=zeros(st.volume, k))
+      volume=zeros(st.volume, k), volume_fraction=None if
+      st.volume_fraction is None else edge(st.volume_fraction, k))
   field = boundary.BoundaryField(
       index=zeros(f.index, kb), solid_normal=edge(f.solid_normal, kb),
       solid_weight=zeros(f.solid_weight, kb),

@@ -33,6 +33,9 @@ class MPMState:
     volume_correction: [N] log volume gained by separation (Tampubolon 2017).
     volume: [N] initial particle volume (m^2 per metre of depth); 0 marks a
       padding particle, which has no mass and does not move.
+    volume_fraction: [N] the grains' share phi of the sand's volume, with
+      the compressible mu(I) only; None otherwise (the other rheologies'
+      programs are unchanged).
   """
   x: jax.Array
   v: jax.Array
@@ -40,6 +43,7 @@ class MPMState:
   F: jax.Array
   volume_correction: jax.Array
   volume: jax.Array
+  volume_fraction: jax.Array | None = None
 
 
 @_pytree.pytree_dataclass
@@ -72,12 +76,17 @@ class SimParams:
   mu_i: constitutive.MuI | None = None
 
 
-def init_state(x: jax.Array, volume: jax.Array) -> MPMState:
-  """Sand at rest at positions ``x`` [N, 2] with volumes ``volume`` [N]."""
+def init_state(x: jax.Array, volume: jax.Array,
+               volume_fraction: float | None = None) -> MPMState:
+  """Sand at rest at positions ``x`` [N, 2] with volumes ``volume`` [N]
+  (and, for the compressible mu(I), the volume fraction phi of all)."""
   n = x.shape[0]
   eye = jnp.broadcast_to(jnp.eye(2, dtype=x.dtype), (n, 2, 2))
+  phi = (None if volume_fraction is None else
+         jnp.full_like(volume, volume_fraction))
   return MPMState(x=x, v=jnp.zeros_like(x), C=jnp.zeros_like(eye), F=eye,
-                  volume_correction=jnp.zeros_like(volume), volume=volume)
+                  volume_correction=jnp.zeros_like(volume), volume=volume,
+                  volume_fraction=phi)
 
 
 def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
@@ -127,13 +136,18 @@ def substep(state: MPMState, params: SimParams, field: boundary.BoundaryField,
   else:
     x = jnp.clip(x, 0.0, params.domain[None, :])
   F = state.F + dt * jnp.sum(C[..., :, :, None] * state.F[..., None, :, :], -2)
+  phi = state.volume_fraction
+  if phi is not None:
+    # The volume follows the same velocity gradient as F.
+    phi = constitutive.advect_volume_fraction(phi, C, dt)
   if params.mu_i is None:
     F, vc = constitutive.project(F, state.volume_correction, mu, lam, alpha)
   else:
     F, vc = constitutive.project_mu_i(F, state.volume_correction, mu, lam,
-                                      params.mu_i, dt)
+                                      params.mu_i, dt, phi)
   max_speed_sq = jnp.max(jnp.sum(v * v, -1))
-  return state.replace(x=x, v=v, C=C, F=F, volume_correction=vc), max_speed_sq
+  return state.replace(x=x, v=v, C=C, F=F, volume_correction=vc,
+                       volume_fraction=phi), max_speed_sq
 
 
 def advance(state: MPMState, params: SimParams, field: boundary.BoundaryField,

@@ -305,11 +305,11 @@ ROWS = (
     ("generate_unknown_rheology", "experiments.generate_dataset",
      [TEST, "--config.dataset.rheology=mui", "--out={d}/out"],
      "dataset.rheology = 'mui'; allowed: one of ['drucker_prager', "
-     "'mu_i', 'mu_i_regularized']"),
+     "'mu_i', 'mu_i_regularized', 'mu_i_compressible']"),
     ("convergence_unknown_rheology", "experiments.convergence",
      ["--out={d}/out", "--rheologies=drucker_prager,mui"],
      "--rheologies=mui: allowed: one of ['drucker_prager', 'mu_i', "
-     "'mu_i_regularized']"),
+     "'mu_i_regularized', 'mu_i_compressible']"),
     ("convergence_regularized_without_a_well_posed_range",
      "experiments.convergence",
      ["--out={d}/out", "--rheologies=mu_i_regularized"],

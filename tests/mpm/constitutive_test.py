@@ -505,5 +505,158 @@ class RegularizedMuITest(parameterized.TestCase):
     self.assertAlmostEqual(float(g_alpha) / float(fd), 1.0, delta=0.02)
 
 
+def _compressible(dilatancy=4.09, phi_max=0.6, phi_min=0.4):
+  return _mu_i().replace(phi_max=jnp.float32(phi_max),
+                         phi_min=jnp.float32(phi_min),
+                         dilatancy=jnp.float32(dilatancy))
+
+
+_advect = jax.jit(constitutive.advect_volume_fraction)
+
+
+def _steady_shear_compressible(rheology, phi0, shear_rate, dt=1e-5,
+                               strain=8.0):
+  """A material point sheared at a constant rate (1/s) to a shear strain
+  ``strain``, its pressure held at p0 = (mu + lam) 0.001 = 340 Pa by a
+  servo (each step an isotropic stretch brings its elastic log volume back
+  to -0.001): free to dilate or compact. Its tau_eq / p, I, phi at the end,
+  and phi J, J the total volume ratio (the grains' volume, phi0)."""
+  steps = int(round(strain / (shear_rate * dt)))
+  f0 = jnp.eye(2, dtype=jnp.float32) * math.exp(-0.0005)
+
+  def body(_, state):
+    f, vc, phi, log_j = state
+    trace, _ = constitutive.log_strain(f)
+    rate = (-0.001 - trace) / (2 * dt)
+    grad = jnp.stack([jnp.stack([rate, jnp.float32(shear_rate)]),
+                      jnp.stack([jnp.float32(0), rate])])
+    phi = constitutive.advect_volume_fraction(phi, grad, dt)
+    step = jnp.eye(2) + dt * grad
+    f, vc = constitutive.project_mu_i(step @ f, vc, MU, LAM, rheology, dt,
+                                      phi)
+    return f, vc, phi, log_j + jnp.log(jnp.linalg.det(step))
+
+  f, _, phi, log_j = jax.jit(lambda f0: jax.lax.fori_loop(
+      0, steps, body, (f0, jnp.zeros(()), jnp.float32(phi0),
+                       jnp.zeros(()))))(f0)
+  p, tau = _pressure_and_shear(constitutive.kirchhoff_stress(f, MU, LAM))
+  return (tau / p, shear_rate * 5e-4 / math.sqrt(p / 2650.0), float(phi),
+          float(phi) * math.exp(float(log_j)))
+
+
+class CompressibleMuITest(parameterized.TestCase):
+  """The compressible mu(I) (``mu_i_compressible``): a volume fraction phi
+  relaxing toward phi_eq(I) through the dilatancy tan psi = K (phi -
+  phi_eq(I))."""
+
+  def test_without_dilatancy_it_is_the_plain_return(self):
+    """K = 0 makes the same float32 operations give the same values: bit
+    for bit op by op; compiled, XLA fuses the two programs differently
+    (and may contract a multiply-add), within 2 ulps."""
+    f = _random_f(np.random.default_rng(11), 500).astype(np.float32)
+    vc = np.random.default_rng(12).uniform(0, 0.01, 500).astype(np.float32)
+    vc[::2] = 0.0
+    phi = np.random.default_rng(13).uniform(0.4, 0.7, 500).astype(
+        np.float32)
+    for project in (constitutive.project_mu_i, _project_mu_i):
+      f_plain, vc_plain = project(f, vc, MU, LAM, _mu_i(), 1e-4)
+      f_k0, vc_k0 = project(f, vc, MU, LAM, _compressible(0.0), 1e-4, phi)
+      if project is _project_mu_i:
+        np.testing.assert_array_max_ulp(f_k0, f_plain, maxulp=2)
+      else:
+        np.testing.assert_array_equal(f_k0, f_plain)
+      np.testing.assert_array_equal(vc_k0, vc_plain)
+    # ... and with it, the flow differs.
+    f_k, _ = _project_mu_i(f, vc, MU, LAM, _compressible(), 1e-4, phi)
+    self.assertGreater(np.abs(f_k - f_plain).max(), 1e-5)
+
+  @parameterized.parameters((0.62, 1), (0.56, -1), (0.5, 0))
+  def test_a_hand_computed_return(self, phi, sign):
+    # As MuITest's: p = 340 Pa, tau_eq = 544 Pa; a dense sample (phi above
+    # phi_eq of the return's I) dilates, a loose one compacts (sign: of the
+    # pressure's change; 0: so loose that compacting by tan psi y / mu
+    # would pass zero pressure, which is where it stops).
+    f = np.array([[1.0, 0.004], [0.0, 1.0]]) * math.exp(-0.0005)
+    dt, k = 1e-4, 4.09
+    p_tr, tau_tr = _pressure_and_shear(constitutive.kirchhoff_stress(
+        jnp.asarray(f, jnp.float32), MU, LAM))
+    # By hand, in float64: (S - y)(I_0 + c y) = p c y ((mu_2 - mu_s) +
+    # slope (I_0 + c y)), S = tau_tr - mu_rest p.
+    p = -(MU + LAM) * math.log(np.linalg.det(f))
+    c = 5e-4 / (MU * dt * math.sqrt(p / 2650.0))
+    mu_rest, slope = 0.6 + k * (phi - 0.6), k * 0.2
+    excess = tau_tr - mu_rest * p
+    y = max(np.roots([c * (1 + slope * c * p),
+                      0.279 + c * (0.26 * p - excess) + slope * c * p * 0.279,
+                      -excess * 0.279]).real)
+    inertial = c * y
+    tan_psi = k * (phi - (0.6 - 0.2 * inertial))
+    f_new, _ = _project_mu_i(jnp.asarray(f, jnp.float32), jnp.zeros(()),
+                             MU, LAM, _compressible(k), dt, jnp.float32(phi))
+    p_new, tau_new = _pressure_and_shear(
+        constitutive.kirchhoff_stress(f_new, MU, LAM))
+    self.assertAlmostEqual(tau_new / (tau_tr - y), 1.0, delta=2e-3)
+    # The friction it returns to is mu(I) + tan psi at the trial pressure.
+    self.assertAlmostEqual(
+        (tau_tr - y) / p,
+        float(constitutive.mu_of_i(inertial, _mu_i())) + tan_psi, delta=1e-6)
+    # The plastic volume change tan psi y / mu is taken from the elastic
+    # volume: the pressure rises by (mu + lam) of it.
+    if sign:
+      self.assertAlmostEqual((p_new - p) / ((MU + LAM) * tan_psi * y / MU),
+                             1.0, delta=0.02)
+      self.assertEqual(np.sign(p_new - p), sign)
+    else:
+      self.assertLess((MU + LAM) * tan_psi * y / MU, -p)
+      self.assertLess(abs(p_new), 1e-3 * p)
+
+  @parameterized.product(phi0=(0.62, 0.48), shear_rate=(30.0, 200.0))
+  def test_steady_shear_relaxes_to_phi_eq_and_mu_of_i(self, phi0,
+                                                     shear_rate):
+    """Sheared at constant rate and pressure, a dense sample dilates and a
+    loose one compacts to phi_eq(I) = 0.6 - 0.2 I of the imposed I, and
+    the friction settles at mu(I); the grains' volume is kept."""
+    rheology = _compressible()
+    ratio, inertial, phi, grains = _steady_shear_compressible(
+        rheology, phi0, shear_rate)
+    expected_phi = 0.6 - 0.2 * inertial
+    self.assertAlmostEqual(phi, expected_phi, delta=0.002)
+    self.assertEqual(np.sign(phi - phi0), -1 if phi0 > expected_phi else 1)
+    expected = float(constitutive.mu_of_i(inertial, rheology))
+    self.assertAlmostEqual(ratio, expected, delta=0.01 * expected)
+    self.assertAlmostEqual(grains / phi0, 1.0, delta=1e-4)
+
+  def test_advection_keeps_the_grains_volume_and_a_physical_range(self):
+    rng = np.random.default_rng(14)
+    grad = rng.normal(0, 20, (200, 2, 2)).astype(np.float32)
+    phi = rng.uniform(0.3, 0.65, 200).astype(np.float32)
+    new = _advect(phi, grad, 1e-3)
+    jac = np.linalg.det(np.eye(2) + 1e-3 * grad.astype(np.float64))
+    np.testing.assert_allclose(new * jac, phi, rtol=1e-5)
+    # Compressed past the grains' own volume, phi stops at 1.
+    self.assertEqual(float(_advect(jnp.float32(0.9), -500 * jnp.eye(2),
+                                   1e-3)), 1.0)
+
+  def test_gradients_finite(self):
+    f = np.concatenate([
+        np.broadcast_to(np.eye(2), (3, 2, 2)),
+        _random_f(np.random.default_rng(15), 200, log_mean=(-0.05, -0.01))
+    ]).astype(np.float32)
+    phi = np.random.default_rng(16).uniform(0.45, 0.65, 203).astype(
+        np.float32)
+
+    def loss(f, phi, rheology):
+      f_new, vc = constitutive.project_mu_i(f, jnp.zeros(f.shape[0]), MU,
+                                            LAM, rheology, 1e-4, phi)
+      return jnp.sum(_stress(f_new, MU, LAM)) + jnp.sum(vc)
+
+    grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))(
+        jnp.asarray(f), jnp.asarray(phi), _compressible())
+    leaves = jax.tree.leaves(grads)
+    self.assertTrue(all(np.all(np.isfinite(x)) for x in leaves))
+    self.assertGreater(abs(float(grads[2].dilatancy)), 0.0)
+    self.assertGreater(np.abs(grads[1]).max(), 0.0)
+
+
 if __name__ == "__main__":
   absltest.main()

@@ -385,7 +385,8 @@ class OtherSpecTest(absltest.TestCase):
       dataclasses.replace(SPEC, num_test=0)
     with self.assertRaisesRegex(ValueError, "dataset.rheology = 'mui'; "
                                 "allowed: one of \\['drucker_prager', "
-                                "'mu_i', 'mu_i_regularized'\\]"):
+                                "'mu_i', 'mu_i_regularized', "
+                                "'mu_i_compressible'\\]"):
       dataclasses.replace(SPEC, rheology="mui")
 
   def test_a_dataset_made_before_the_rheology_key_is_drucker_prager(self):

@@ -168,10 +168,11 @@ def _invalid_cases():
       dict(testcase_name="unknown_rheology",
            d=_with(material__rheology="bingham"), key="material.rheology",
            allowed="allowed: one of ['drucker_prager', 'mu_i', "
-           "'mu_i_regularized']"),
+           "'mu_i_regularized', 'mu_i_compressible']"),
       dict(testcase_name="mu_i_key_without_mu_i",
            d=_with(material__mu_2=0.9), key="material",
-           allowed="allowed: a rheology of ['mu_i', 'mu_i_regularized']"),
+           allowed="allowed: a rheology of ['mu_i', 'mu_i_regularized', "
+           "'mu_i_compressible']"),
       dict(testcase_name="regularization_key_with_plain_mu_i",
            d=_with(material__rheology="mu_i", material__alpha_reg=1.0),
            key="material", allowed="allowed: a rheology of "
@@ -185,6 +186,27 @@ def _invalid_cases():
            d=_with(material__rheology="mu_i_regularized",
                    material__mu_s=0.38, material__alpha_reg=9.0),
            key="material.alpha_reg", allowed="allowed: a smaller"),
+      # The compressible mu(I).
+      dict(testcase_name="compressible_key_with_plain_mu_i",
+           d=_with(material__rheology="mu_i", material__dilatancy=1.0),
+           key="material", allowed="allowed: a rheology of "
+           "['mu_i_compressible']"),
+      dict(testcase_name="phi_min_not_below_phi_max",
+           d=_with(material__rheology="mu_i_compressible",
+                   material__phi_min=0.6, material__phi_max=0.55),
+           key="material.phi_min", allowed="allowed: 0 < phi_min < phi_max"),
+      dict(testcase_name="phi_max_of_one",
+           d=_with(material__rheology="mu_i_compressible",
+                   material__phi_max=1.0),
+           key="material.phi_max", allowed="allowed: (0, 1)"),
+      dict(testcase_name="phi_0_of_zero",
+           d=_with(material__rheology="mu_i_compressible",
+                   material__phi_0=0.0),
+           key="material.phi_0", allowed="allowed: (0, 1)"),
+      dict(testcase_name="negative_dilatancy",
+           d=_with(material__rheology="mu_i_compressible",
+                   material__dilatancy=-1.0),
+           key="material.dilatancy", allowed="allowed: [0, 100]"),
       dict(testcase_name="mu_2_not_above_mu_s",
            d=_with(material__rheology="mu_i", material__mu_s=0.6,
                    material__mu_2=0.6), key="material.mu_2",
@@ -303,6 +325,13 @@ class RoundTripTest(parameterized.TestCase):
     self.assertAlmostEqual(m.mu_2, m.mu_s + 0.26)
     self.assertEqual((m.I_0, m.grain_diameter, m.grain_density),
                      (0.279, 0.0005, 2650.0))
+    self.assertIsNone(m.phi_0)
+    d = _with(material__rheology="mu_i_compressible")
+    m = mpm.Scene.from_dict(d).material
+    self.assertEqual((m.phi_max, m.phi_min, m.dilatancy), (0.6, 0.4, 4.09))
+    # The sand starts at the critical state at rest, phi_eq(0).
+    self.assertEqual(m.phi_0, 0.6)
+    self.assertIn("phi_max", mpm.Scene.from_dict(d).to_dict()["material"])
 
   @parameterized.named_parameters(
       ("default", {}),
@@ -326,6 +355,9 @@ class RoundTripTest(parameterized.TestCase):
                              "grain_density": 2500}}),
       ("mu_i_regularized", {"material": {"rheology": "mu_i_regularized",
                                          "mu_s": 0.38, "alpha_reg": 1.5}}),
+      ("mu_i_compressible", {"material": {
+          "rheology": "mu_i_compressible", "phi_max": 0.62, "phi_min": 0.5,
+          "dilatancy": 2.0, "phi_0": 0.55}}),
   )
   def test_dict_and_json(self, d):
     scene = mpm.Scene.from_dict(d)
