@@ -18,6 +18,7 @@ import numpy as np
 from mpm import boundary
 from mpm import constitutive
 from mpm import geometry
+from mpm import programs
 from mpm import resolution
 from mpm import scene as scene_lib
 from mpm import solver
@@ -213,44 +214,6 @@ class SimulationResult:
   resolution: "resolution.Resolution | None" = None
 
 
-_rollout = jax.jit(solver.rollout, static_argnames=(
-    "spec", "n_frames", "n_substeps", "remat"))
-_batched_rollout = jax.jit(
-    jax.vmap(solver.rollout, in_axes=(0, 0, 0, None, None, None)),
-    static_argnums=(3, 4, 5))
-
-_windowed_rollout = jax.jit(solver.rollout_windowed, static_argnames=(
-    "spec", "size", "n_frames", "n_substeps", "capacity"))
-_batched_windowed_rollout = jax.jit(
-    jax.vmap(solver.rollout_windowed, in_axes=(0, 0, 0, None, None, None,
-                                               None, None)),
-    static_argnums=(3, 4, 5, 6, 7))
-
-# Compiled chunk programs by (function, static args, argument shapes). A
-# study of many scenes and spacings compiles hundreds, and every program
-# jax has compiled keeps memory maps of its own, which XLA:CPU runs out of
-# (the speed/accuracy study crashed so, 2026-11-26); dropping ours does not
-# free them, jax's caches hold them too. So past MAX_COMPILED programs all
-# are dropped, jax's included (``jax.clear_caches``; with the entry points'
-# persistent compilation cache a recompile is a read from disk).
-_compiled: dict = {}
-MAX_COMPILED = 64
-
-
-def _compile(fn, *args):
-  key = (id(fn), args[3:], jax.tree.structure(args[:3]),
-         tuple((a.shape, a.dtype) for a in jax.tree.leaves(args[:3])))
-  if key in _compiled:
-    return _compiled[key], 0.0
-  if len(_compiled) >= MAX_COMPILED:
-    _compiled.clear()
-    jax.clear_caches()
-  start = time.perf_counter()
-  compiled = fn.lower(*args).compile()
-  _compiled[key] = compiled
-  return compiled, time.perf_counter() - start
-
-
 def chunking(num_frames: int, chunk_frames: int) -> tuple[int, int]:
   """(number of chunks, frames per chunk) covering num_frames - 1 steps."""
   steps = max(num_frames - 1, 1)
@@ -403,15 +366,14 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
       rung_params = params.replace(
           dt=jnp.asarray(dt if batched else dt[0], jnp.float32))
       bounds = [speed_allowed(s.scene, n) for s in setups]
-    capacity = ()
+    fn = programs.chunk_program(batched, windowed=size is not None)
     if size is None:
-      fn, static = (_batched_rollout if batched else _rollout), ()
+      statics = (first.spec, frames, n)
     else:
-      fn = _batched_windowed_rollout if batched else _windowed_rollout
-      static = (size,)
-      capacity = (window.boundary_capacity(boundary_index, first.spec, size),)
-    compiled, seconds = _compile(fn, state, rung_params, field, first.spec,
-                                 *static, frames, n, *capacity)
+      statics = (first.spec, size, frames, n, window.boundary_capacity(
+          boundary_index, first.spec, size))
+    compiled, seconds = programs.compiled(fn, state, rung_params, field,
+                                          *statics)
     compile_time += seconds
     return compiled, rung_params, bounds
 

@@ -11,6 +11,7 @@ import numpy as np
 
 import mpm
 from mpm import boundary
+from mpm import programs
 from mpm import solver
 from mpm import window
 
@@ -56,10 +57,10 @@ class SimulateTest(parameterized.TestCase):
   def test_past_the_programs_kept_all_are_dropped_and_runs_stay_equal(self):
     scenes = [_scene("a"), _scene("b", solver={"dx": 0.015, "cfl": 0.4})]
     first = [mpm.simulate(s, chunk_frames=4) for s in scenes]
-    with mock.patch.object(mpm.simulation, "MAX_COMPILED", 1), \
-        mock.patch.dict(mpm.simulation._compiled, clear=True):
+    with mock.patch.object(programs, "MAX_COMPILED", 1), \
+        mock.patch.dict(programs._compiled, clear=True):
       again = [mpm.simulate(s, chunk_frames=4) for s in scenes]
-      self.assertLen(mpm.simulation._compiled, 1)
+      self.assertLen(programs._compiled, 1)
     for f, a in zip(first, again):
       np.testing.assert_array_equal(a.positions, f.positions)
     self.assertGreater(again[0].compile_time_s, 0.0)   # compiled anew
