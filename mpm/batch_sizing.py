@@ -12,6 +12,7 @@ from typing import Sequence
 
 import jax
 
+from mpm import programs
 from mpm import scene as scene_lib
 from mpm import simulation
 
@@ -55,8 +56,9 @@ def program_bytes(setups: Sequence[simulation.Setup], chunk_frames: int = 50) ->
   state, params, field = simulation._stacked(setups, batched=True)
   first = setups[0]
   _, frames = simulation.chunking(first.scene.num_frames, chunk_frames)
-  compiled, _ = simulation._compile(simulation._batched_rollout, state, params, field, first.spec,
-                         frames, first.n_substeps)
+  compiled, _ = programs.compiled(
+      programs.chunk_program(batched=True, windowed=False), state, params,
+      field, first.spec, frames, first.n_substeps)
   m = compiled.memory_analysis()
   if m is None:
     raise NotImplementedError("no memory analysis on this backend")
