@@ -353,6 +353,7 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
   pick = lambda a, b: a[b] if batched else a
   compile_time = 0.0
   boundary_index = np.asarray(field.index) if grid_window else None
+  capacities = {}              # window size -> its boundary capacity
 
   def rung(k, size):
     """(compiled chunk, params, per-setup speed bounds) at ladder rung k,
@@ -370,8 +371,10 @@ def simulate_setups(setups: Sequence[Setup], *, chunk_frames: int = 50,
     if size is None:
       statics = (first.spec, frames, n)
     else:
-      statics = (first.spec, size, frames, n, window.boundary_capacity(
-          boundary_index, first.spec, size))
+      if size not in capacities:
+        capacities[size] = window.boundary_capacity(boundary_index,
+                                                    first.spec, size)
+      statics = (first.spec, size, frames, n, capacities[size])
     compiled, seconds = programs.compiled(fn, state, rung_params, field,
                                           *statics)
     compile_time += seconds
