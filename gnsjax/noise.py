@@ -5,7 +5,9 @@ the errors it will make in its own rollouts. The velocity noise is a random
 walk over the C - 1 input velocities whose last step has standard deviation
 ``noise_std`` (m/frame); positions get its running sum. The target is moved
 with the last input position, so the model is asked to undo the velocity
-noise (``adjust_target``).
+noise (``adjust_target``). Some windows may be left clean
+(``clean_windows``): sand exactly at rest, with its exact zero target,
+which noisy windows never show (docs/gns.md).
 """
 
 import jax
@@ -30,3 +32,31 @@ def random_walk(key: jax.Array, shape: tuple[int, int, int],
 def adjust_target(target: jax.Array, noise: jax.Array) -> jax.Array:
   """Target [N, 2] shifted with the last input frame's noise [C, N, 2]."""
   return target + noise[-1]
+
+
+# A window's sand rests below this mean speed (m per stored frame): 0.1 mm,
+# about 4 cm/s; 38% of the small dataset's windows (docs/gns.md).
+RESTING_SPEED = 1e-4
+
+
+def resting(inputs: jax.Array, moving: jax.Array, stride: int) -> jax.Array:
+  """bool [B]: whether each window's sand rests, its mean speed over the
+  input frames [B, C, N, 2] (``stride`` stored frames apart) below
+  ``RESTING_SPEED``; ``moving`` [B, N] marks the sand."""
+  step = jnp.linalg.norm(jnp.diff(inputs, axis=1), axis=-1)    # [B, C-1, N]
+  per_node = jnp.mean(step, axis=1) * moving
+  speed = jnp.sum(per_node, -1) / jnp.maximum(jnp.sum(moving, -1), 1)
+  return speed / stride < RESTING_SPEED
+
+
+def clean_windows(key: jax.Array, positions: jax.Array, moving: jax.Array,
+                  fraction: float, resting_only: bool,
+                  stride: int) -> jax.Array:
+  """bool [B]: the windows (frames [B, C + 1, N, 2], the last the target)
+  left without noise: each with probability ``fraction`` (a draw from
+  ``fold_in(key, 1)``), and only resting ones if ``resting_only``."""
+  eligible = jax.random.uniform(jax.random.fold_in(key, 1),
+                                positions.shape[:1]) < fraction
+  if resting_only:
+    eligible &= resting(positions[:, :-1], moving, stride)
+  return eligible

@@ -46,6 +46,7 @@ from gnsjax import features
 from gnsjax import graph
 from gnsjax import metrics as metrics_lib
 from gnsjax import models
+from gnsjax import noise as noise_lib
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
 from gnsjax import simulator
@@ -114,33 +115,31 @@ class Trainer:
 
     outside = config.train.target_outside_solids
     clean = config.train.clean_fraction
-    resting_only = config.train.clean_resting_only
-    stride = config.train.frame_stride
+    clean_windows = functools.partial(
+        noise_lib.clean_windows, fraction=clean,
+        resting_only=config.train.clean_resting_only,
+        stride=config.train.frame_stride)
 
     def prepare(key, positions, moving, solids):
       keys = jax.random.split(key, positions.shape[0])
       std = jnp.full((positions.shape[0],), noise_std, jnp.float32)
       if clean:
-        # Windows left clean: sand exactly at rest, with its exact zero
-        # target, which noisy windows never show (docs/gns.md).
-        draw = jax.random.uniform(jax.random.fold_in(key, 1), std.shape)
-        eligible = draw < clean
-        if resting_only:
-          eligible &= resting(positions[:, :-1], moving, stride)
-        std = jnp.where(eligible, 0.0, std)
+        std = jnp.where(clean_windows(key, positions, moving), 0.0, std)
       add = lambda k, x, m, n, s: simulator.add_noise(k, x, m, n, solids=s)
       return jax.vmap(add)(keys, positions, moving, std,
                            solids if outside else None)
 
-    def batch_loss(params, graphs: simulator.Graph, target):
+    def batch_loss(params, graphs: simulator.Graph, target, weights=None):
       per_window = jax.vmap(
           lambda g, t: simulator.loss(self.model, params, g, t, ctx, radius))(
               graphs, target)
+      if weights is not None:
+        per_window = per_window * weights
       return jnp.mean(per_window)
 
-    def train_step(state, graphs, target):
+    def train_step(state, graphs, target, weights=None):
       loss, grads = jax.value_and_grad(batch_loss)(state.params, graphs,
-                                                   target)
+                                                   target, weights)
       updates, opt_state = self.tx.update(grads, state.opt_state, state.params)
       params = optax.apply_updates(state.params, updates)
       return (state.replace(step=state.step + 1, params=params,
@@ -148,6 +147,7 @@ class Trainer:
               {"loss": loss, "grad_norm": optax.global_norm(grads)})
 
     self.prepare = jax.jit(prepare)
+    self._clean_windows = jax.jit(clean_windows)
     self.eval_loss = jax.jit(batch_loss)
     self.train_step = jax.jit(train_step, donate_argnums=0)
     self._unroll = jax.jit(
@@ -288,6 +288,20 @@ class Trainer:
                              put(receivers), solids)
     return graphs, target
 
+  def window_weights(self, batch: batching.Batch, key: jax.Array):
+    """float [B]: each window's weight in the training loss, or None when
+    all weigh 1: ``train.clean_weight`` for the windows that
+    :meth:`batch_arrays` (same ``batch`` and ``key``) left clean, so that
+    exact rest, a small target among large ones, is fitted closely."""
+    tcfg = self.config.train
+    if not tcfg.clean_fraction or tcfg.clean_weight == 1.0:
+      return None
+    c = self.problem.input_frames
+    positions = self.put(batch.positions)
+    window = positions[:, positions.shape[1] - c - 1:]
+    clean = self._clean_windows(key, window, self.put(batch.moving))
+    return jnp.where(clean, jnp.float32(tcfg.clean_weight), 1.0)
+
   def _push_forward(self, params, inputs, types, moving, solids, steps):
     """Inputs [B, C, N, 2] after ``steps`` learned steps from ``inputs``."""
     spec = self.problem.spec
@@ -316,21 +330,6 @@ class Trainer:
     self._pushforward_nbrs[n] = nbrs
     frames = jnp.concatenate([window[:-1], carried, positions[-1:]], 0)
     return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
-
-
-# A window's sand rests below this mean speed (m per stored frame): 0.1 mm,
-# about 4 cm/s; 38% of the small dataset's windows (docs/gns.md).
-RESTING_SPEED = 1e-4
-
-
-def resting(inputs: jax.Array, moving: jax.Array, stride: int) -> jax.Array:
-  """bool [B]: whether each window's sand rests, its mean speed over the
-  input frames [B, C, N, 2] (``stride`` stored frames apart) below
-  ``RESTING_SPEED``; ``moving`` [B, N] marks the sand."""
-  step = jnp.linalg.norm(jnp.diff(inputs, axis=1), axis=-1)    # [B, C-1, N]
-  per_node = jnp.mean(step, axis=1) * moving
-  speed = jnp.sum(per_node, -1) / jnp.maximum(jnp.sum(moving, -1), 1)
-  return speed / stride < RESTING_SPEED
 
 
 def _process_rows(x: jax.Array) -> np.ndarray:
@@ -522,10 +521,11 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
       # the same steps.
       push = pushforward if pushforward and np.random.default_rng(
           [tcfg.seed, step, 1]).random() < tcfg.pushforward_probability else 0
-      graphs, target = trainer.batch_arrays(
-          batch, jax.random.fold_in(state.key, step), params=state.params,
-          pushforward=push)
-      state, step_metrics = trainer.train_step(state, graphs, target)
+      key = jax.random.fold_in(state.key, step)
+      graphs, target = trainer.batch_arrays(batch, key, params=state.params,
+                                            pushforward=push)
+      weights = None if push else trainer.window_weights(batch, key)
+      state, step_metrics = trainer.train_step(state, graphs, target, weights)
       done = step + 1
       loss = float(step_metrics["loss"])
       if not math.isfinite(loss):

@@ -64,9 +64,13 @@ def get_config() -> ml_collections.ConfigDict:
   # This fraction of the training windows gets no noise (drawn per window):
   # the model also sees sand exactly at rest, whose target is exactly zero.
   config.train.clean_fraction = 0.0
-  # ... only among windows whose sand rests (train.resting: mean speed below
+  # ... only among windows whose sand rests (noise.resting: mean speed below
   # 0.1 mm per stored frame); the moving ones all keep their noise.
   config.train.clean_resting_only = False
+  # The clean windows' loss counts this many times: their targets (exact
+  # rest) are small beside the moving windows', and the deposit's jitter
+  # is the misfit of exactly them (docs/gns.md).
+  config.train.clean_weight = 1.0
   # Gather training windows on the device from the whole split stored there
   # (batching.DeviceWindows) instead of reading them on the host; needs
   # model.boundary_particles = False.

@@ -21,6 +21,7 @@ from gnsjax import checkpoint
 from gnsjax import config as config_lib
 from gnsjax import data
 from gnsjax import features
+from gnsjax import noise
 from gnsjax import rollout
 from gnsjax import run as run_lib
 from gnsjax import simulator
@@ -428,11 +429,11 @@ class RestingTest(absltest.TestCase):
     slow, fast = (np.zeros((c, n, 2), np.float32) for _ in range(2))
     for w, factor in ((slow, 0.9), (fast, 1.1)):
       w[:, :3, 0] = np.arange(c)[:, None] * stride * factor * (
-          train.RESTING_SPEED)
+          noise.RESTING_SPEED)
     for w in (still, slow, fast):
       w[:, 3, 1] = np.arange(c) * 1.0
     moving = np.array([[True, True, True, False]] * 3)
-    got = train.resting(jnp.asarray(np.stack([still, slow, fast])),
+    got = noise.resting(jnp.asarray(np.stack([still, slow, fast])),
                         jnp.asarray(moving), stride)
     np.testing.assert_array_equal(got, [True, True, False])
 
@@ -485,7 +486,7 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
     _, out = self._batch_arrays(clean_fraction=1.0, clean_resting_only=True)
     c = noisy[0].shape[1]
     inputs = batch.positions[:, -c - 1:-1]
-    rest = np.asarray(train.resting(jnp.asarray(inputs),
+    rest = np.asarray(noise.resting(jnp.asarray(inputs),
                                     jnp.asarray(batch.moving),
                                     fixtures.tiny_config().train.frame_stride))
     np.testing.assert_array_equal(rest, np.isin(np.arange(8), (2, 5)))
@@ -494,6 +495,62 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
               (noisy[0][b], noisy[1][b]))
       np.testing.assert_array_equal(out[0][b], want[0])
       np.testing.assert_array_equal(out[1][b], want[1])
+
+
+class CleanWeightTest(fixtures.TinyRunTestCase):
+
+  def _trainer_and_batch(self, **options):
+    """A trainer and a batch of eight tiny windows, those of 2 and 5 held
+    still (as in CleanFractionTest)."""
+    config = fixtures.tiny_config(noise_std=3e-3, **options)
+    trainer = train.Trainer(config, run_lib.load_problem(self.data, config))
+    with data.WindowDataset(data.split_path(self.data, "train"),
+                            input_frames=trainer.problem.input_frames,
+                            seed=0) as ds:
+      windows = [ds[k] for k in range(8)]
+    for k in (2, 5):
+      x = windows[k].positions
+      windows[k] = windows[k]._replace(
+          positions=np.broadcast_to(x[:1], x.shape).copy())
+    return trainer, trainer.make_batch(windows)
+
+  def test_the_weight_falls_on_exactly_the_windows_left_clean(self):
+    key = jax.random.key(3)
+    trainer, batch = self._trainer_and_batch(clean_fraction=1.0,
+                                             clean_resting_only=True,
+                                             clean_weight=10.0)
+    np.testing.assert_array_equal(trainer.window_weights(batch, key),
+                                  np.where(np.isin(np.arange(8), (2, 5)),
+                                           10.0, 1.0))
+    # Drawn at random: the same draw as batch_arrays' noise.
+    trainer, batch = self._trainer_and_batch(clean_fraction=0.5,
+                                             clean_weight=4.0)
+    weights = np.asarray(trainer.window_weights(batch, key))
+    graphs, _ = trainer.batch_arrays(batch, key)
+    c = trainer.problem.input_frames
+    clean = np.all(np.asarray(graphs.positions) ==
+                   batch.positions[:, -c - 1:-1], axis=(1, 2, 3))
+    self.assertTrue(clean.any() and not clean.all())
+    np.testing.assert_array_equal(weights, np.where(clean, 4.0, 1.0))
+    # Without a weight (or without clean windows) all weigh the same.
+    for options in ({"clean_fraction": 0.5}, {"clean_weight": 4.0}):
+      trainer, batch = self._trainer_and_batch(**options)
+      self.assertIsNone(trainer.window_weights(batch, key))
+
+  def test_the_loss_weighs_each_window_by_its_weight(self):
+    trainer, batch = self._trainer_and_batch()
+    graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
+    params = trainer.init_state(0).params
+    b = target.shape[0]
+    alone = [float(trainer.eval_loss(params, graphs, target,
+                                     b * jnp.eye(b)[k])) for k in range(b)]
+    np.testing.assert_allclose(
+        float(trainer.eval_loss(params, graphs, target)), np.mean(alone),
+        rtol=1e-5)
+    weights = jnp.arange(1.0, b + 1)
+    np.testing.assert_allclose(
+        float(trainer.eval_loss(params, graphs, target, weights)),
+        np.mean(np.asarray(weights) * np.array(alone)), rtol=1e-5)
 
 
 class DataParallelTest(absltest.TestCase):
