@@ -7,7 +7,8 @@ walk over the C - 1 input velocities whose last step has standard deviation
 with the last input position, so the model is asked to undo the velocity
 noise (``adjust_target``). Some windows may be left clean
 (``clean_windows``): sand exactly at rest, with its exact zero target,
-which noisy windows never show (docs/gns.md).
+which noisy windows never show; or quiet, with noise of every amplitude
+down to the rollout's jitter at rest (``quiet_scale``; docs/gns.md).
 """
 
 import jax
@@ -60,3 +61,13 @@ def clean_windows(key: jax.Array, positions: jax.Array, moving: jax.Array,
   if resting_only:
     eligible &= resting(positions[:, :-1], moving, stride)
   return eligible
+
+
+def quiet_scale(key: jax.Array, shape: tuple[int, ...],
+                minimum: float) -> jax.Array:
+  """Factors on the noise std of the windows left clean, [shape]: 0 if
+  ``minimum`` is 0 (exactly clean), else log-uniform in [minimum, 1], so
+  that every decade of amplitude is drawn as often."""
+  if not minimum:
+    return jnp.zeros(shape)
+  return minimum ** jax.random.uniform(key, shape)

@@ -124,7 +124,10 @@ class Trainer:
       keys = jax.random.split(key, positions.shape[0])
       std = jnp.full((positions.shape[0],), noise_std, jnp.float32)
       if clean:
-        std = jnp.where(clean_windows(key, positions, moving), 0.0, std)
+        scale = noise_lib.quiet_scale(jax.random.fold_in(key, 2), std.shape,
+                                      config.train.clean_scale_min)
+        std = jnp.where(clean_windows(key, positions, moving), scale * std,
+                        std)
       add = lambda k, x, m, n, s: simulator.add_noise(k, x, m, n, solids=s)
       return jax.vmap(add)(keys, positions, moving, std,
                            solids if outside else None)

@@ -71,6 +71,10 @@ def get_config() -> ml_collections.ConfigDict:
   # rest) are small beside the moving windows', and the deposit's jitter
   # is the misfit of exactly them (docs/gns.md).
   config.train.clean_weight = 1.0
+  # 0: those windows get no noise; m > 0: their noise std is scaled by a
+  # factor drawn log-uniformly in [m, 1] per window (noise.quiet_scale),
+  # down to the small jitter of a resting rollout.
+  config.train.clean_scale_min = 0.0
   # Gather training windows on the device from the whole split stored there
   # (batching.DeviceWindows) instead of reading them on the host; needs
   # model.boundary_particles = False.

@@ -481,6 +481,22 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
     self.assertIn(True, kinds)
     self.assertIn(False, kinds)
 
+  def test_quiet_windows_get_the_same_noise_scaled_down(self):
+    batch, (noisy, _) = self._batch_arrays(clean_fraction=0.0)
+    _, (quiet, _) = self._batch_arrays(clean_fraction=1.0,
+                                       clean_scale_min=0.01)
+    c = noisy.shape[1]
+    clean = batch.positions[:, -c - 1:-1]
+    moved = np.abs(noisy - clean) > 1e-3   # well above float32 rounding
+    ratio = (quiet - clean)[moved] / (noisy - clean)[moved]
+    scales = []
+    for b in range(len(batch.positions)):
+      per_window = ratio[np.nonzero(moved)[0] == b]
+      np.testing.assert_allclose(per_window, per_window[0], rtol=3e-2)
+      scales.append(per_window[0])
+    self.assertTrue(all(0.01 <= s <= 1.0 + 1e-3 for s in scales), scales)
+    self.assertGreater(max(scales) / min(scales), 2.0)
+
   def test_only_resting_windows_are_left_clean_with_the_option(self):
     batch, noisy = self._batch_arrays(clean_fraction=0.0)
     _, out = self._batch_arrays(clean_fraction=1.0, clean_resting_only=True)
