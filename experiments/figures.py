@@ -42,7 +42,7 @@ _OBSTACLE = "#d9a066"
 _TYPE_COLOURS = {mpm.RAMP_TYPE: "#222222", mpm.OBSTACLE_TYPE: "#8c2d04"}
 
 
-def _draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
+def draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
   """The ramp and the obstacles as filled solids (from the scene's signed
   distances), axes in metres; boundary particles, where a model has them,
   as dots on their surfaces."""
@@ -99,7 +99,7 @@ def animate(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
   fig, axes = _panels(len(panels))
   dots = []
   for ax, (title, x) in zip(axes, panels):
-    _draw_scene(ax, scene, boundary_positions, boundary_types)
+    draw_scene(ax, scene, boundary_positions, boundary_types)
     ax.set_title(title)
     dots.append(ax.scatter(x[0, :, 0], x[0, :, 1], s=2, c=_SAND, zorder=3,
                            linewidths=0))
@@ -132,7 +132,7 @@ def frame_grid(panels: Sequence[tuple[str, np.ndarray]], scene: mpm.Scene,
   for row, t in enumerate(frames):
     for col, (title, x) in enumerate(panels):
       ax = axes[row, col]
-      _draw_scene(ax, scene, boundary_positions, boundary_types)
+      draw_scene(ax, scene, boundary_positions, boundary_types)
       ax.scatter(x[t, :, 0], x[t, :, 1], s=2, c=_SAND, zorder=3, linewidths=0)
       ax.set_title(f"{title}, t = {t * scene.frame_dt:.2f} s (frame {t})",
                    fontsize=9)
@@ -326,7 +326,7 @@ def final_deposits(results: Sequence[dict], path: str,
                            squeeze=False)
   empty = (np.zeros((0, 2)), np.zeros((0,), np.int32))
   for ax, r in zip(axes.ravel(), cases):
-    _draw_scene(ax, r["trajectory"].scene, *empty)
+    draw_scene(ax, r["trajectory"].scene, *empty)
     for label, x, colour in (("MPM", r["truth"][-1], "#222222"),
                              ("GNS", r["predicted"][-1], "#d62728")):
       ax.scatter(x[:, 0], x[:, 1], s=3, color=colour, alpha=0.7,
@@ -359,7 +359,7 @@ def resolution_deposits(
   colours = plt.get_cmap("viridis")
   empty = (np.zeros((0, 2)), np.zeros((0,), np.int32))
   for ax, (title, scene, runs) in zip(axes.ravel(), cases):
-    _draw_scene(ax, scene, *empty)
+    draw_scene(ax, scene, *empty)
     everything = np.concatenate([x for _, x in runs])
     finest = min(spacing for spacing, _ in runs)
     for k, (spacing, x) in enumerate(runs):

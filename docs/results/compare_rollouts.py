@@ -1,5 +1,5 @@
-"""Two models' rollouts of one test trajectory beside the MPM's, at four
-frames up to the last, and their sand's mean speed near the end (the
+"""Two models' rollouts of one test trajectory beside the MPM's (the ramp
+and the obstacles drawn), at four frames up to the last, and their sand's mean speed near the end (the
 pictures docs/gns.md cites from rest_cleanrest_avg5_all/ and
 ft_rcr_clean10_avg3_all/):
 
@@ -19,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # pylint: disable=wrong-import-position
 import numpy as np  # pylint: disable=wrong-import-position
 
+from experiments import figures  # pylint: disable=wrong-import-position
 from gnsjax import rollout as rollout_lib  # pylint: disable=wrong-import-position
 from gnsjax import run as run_lib  # pylint: disable=wrong-import-position
 from mpm import io as mpm_io  # pylint: disable=wrong-import-position
@@ -48,6 +49,7 @@ for row, workdir in enumerate(models):
   for ax, step in zip(axes[row], (len(x) // 3, 2 * len(x) // 3,
                                   len(x) - 30, len(x) - 1)):
     f = frames[step]
+    figures.draw_scene(ax, t.scene, *[np.zeros((0, 2)), np.zeros((0,), int)])
     ax.scatter(*t.positions[f].T, s=3, c="k", label="MPM")
     ax.scatter(*x[step].T, s=3, c="r", label="GNS")
     ax.set_xlim(*xlim)
