@@ -438,24 +438,28 @@ class RestingTest(absltest.TestCase):
     np.testing.assert_array_equal(got, [True, True, False])
 
 
+def _trainer_and_batch(data_dir, **options):
+  """A trainer (3 mm noise, ``options`` on the tiny config's train section)
+  and a batch of eight tiny windows; the sand of windows 2 and 5 is held
+  still at its first frame (the tiny data's sand always moves)."""
+  config = fixtures.tiny_config(noise_std=3e-3, **options)
+  trainer = train.Trainer(config, run_lib.load_problem(data_dir, config))
+  with data.WindowDataset(data.split_path(data_dir, "train"),
+                          input_frames=trainer.problem.input_frames,
+                          seed=0) as ds:
+    windows = [ds[k] for k in range(8)]
+  for k in (2, 5):
+    x = windows[k].positions
+    windows[k] = windows[k]._replace(
+        positions=np.broadcast_to(x[:1], x.shape).copy())
+  return trainer, trainer.make_batch(windows)
+
+
 class CleanFractionTest(fixtures.TinyRunTestCase):
 
   def _batch_arrays(self, **options):
-    """(batch, (inputs, targets)) of eight tiny windows, 3 mm noise; the
-    sand of windows 2 and 5 is held still at its first frame (the tiny
-    data's sand always moves)."""
-    config = fixtures.tiny_config(noise_std=3e-3, **options)
-    problem = run_lib.load_problem(self.data, config)
-    trainer = train.Trainer(config, problem)
-    with data.WindowDataset(data.split_path(self.data, "train"),
-                            input_frames=problem.input_frames,
-                            seed=0) as ds:
-      windows = [ds[k] for k in range(8)]
-    for k in (2, 5):
-      x = windows[k].positions
-      windows[k] = windows[k]._replace(
-          positions=np.broadcast_to(x[:1], x.shape).copy())
-    batch = trainer.make_batch(windows)
+    """(batch, (inputs, targets)) of ``_trainer_and_batch``'s windows."""
+    trainer, batch = _trainer_and_batch(self.data, **options)
     graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
     return batch, (np.asarray(graphs.positions), np.asarray(target))
 
@@ -516,19 +520,7 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
 class CleanWeightTest(fixtures.TinyRunTestCase):
 
   def _trainer_and_batch(self, **options):
-    """A trainer and a batch of eight tiny windows, those of 2 and 5 held
-    still (as in CleanFractionTest)."""
-    config = fixtures.tiny_config(noise_std=3e-3, **options)
-    trainer = train.Trainer(config, run_lib.load_problem(self.data, config))
-    with data.WindowDataset(data.split_path(self.data, "train"),
-                            input_frames=trainer.problem.input_frames,
-                            seed=0) as ds:
-      windows = [ds[k] for k in range(8)]
-    for k in (2, 5):
-      x = windows[k].positions
-      windows[k] = windows[k]._replace(
-          positions=np.broadcast_to(x[:1], x.shape).copy())
-    return trainer, trainer.make_batch(windows)
+    return _trainer_and_batch(self.data, **options)
 
   def test_the_weight_falls_on_exactly_the_windows_left_clean(self):
     key = jax.random.key(3)
