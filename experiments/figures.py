@@ -42,10 +42,11 @@ _OBSTACLE = "#d9a066"
 _TYPE_COLOURS = {mpm.RAMP_TYPE: "#222222", mpm.OBSTACLE_TYPE: "#8c2d04"}
 
 
-def draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
+def draw_scene(ax, scene: mpm.Scene, boundary_positions=None,
+               boundary_types=None):
   """The ramp and the obstacles as filled solids (from the scene's signed
-  distances), axes in metres; boundary particles, where a model has them,
-  as dots on their surfaces."""
+  distances), axes in metres; boundary particles, where a model has them
+  (positions [M, 2], types [M]), as dots on their surfaces."""
   w, h = scene.domain.width, scene.domain.height
   x, y = np.meshgrid(np.linspace(0, w, 331), np.linspace(0, h, 241))
   p = np.stack([x, y], axis=-1)
@@ -56,9 +57,11 @@ def draw_scene(ax, scene: mpm.Scene, boundary_positions, boundary_types):
     phi = geometry.obstacle_sdf(ramp, geometry.obstacle_params(o), p)
     ax.contourf(x, y, np.asarray(phi), levels=[-9, 0], colors=[_OBSTACLE],
                 zorder=1)
-  for t, colour in _TYPE_COLOURS.items():
-    pts = boundary_positions[boundary_types == t]
-    ax.scatter(pts[:, 0], pts[:, 1], s=1.5, c=colour, zorder=2, linewidths=0)
+  if boundary_positions is not None:
+    for t, colour in _TYPE_COLOURS.items():
+      pts = boundary_positions[boundary_types == t]
+      ax.scatter(pts[:, 0], pts[:, 1], s=1.5, c=colour, zorder=2,
+                 linewidths=0)
   ax.set_xlim(0, w)
   ax.set_ylim(0, h)
   ax.set_aspect("equal")
@@ -324,9 +327,8 @@ def final_deposits(results: Sequence[dict], path: str,
   rows = -(-len(cases) // columns)
   fig, axes = plt.subplots(rows, columns, figsize=(4.5 * columns, 3.4 * rows),
                            squeeze=False)
-  empty = (np.zeros((0, 2)), np.zeros((0,), np.int32))
   for ax, r in zip(axes.ravel(), cases):
-    draw_scene(ax, r["trajectory"].scene, *empty)
+    draw_scene(ax, r["trajectory"].scene)
     for label, x, colour in (("MPM", r["truth"][-1], "#222222"),
                              ("GNS", r["predicted"][-1], "#d62728")):
       ax.scatter(x[:, 0], x[:, 1], s=3, color=colour, alpha=0.7,
@@ -357,9 +359,8 @@ def resolution_deposits(
   fig, axes = plt.subplots(rows, columns, figsize=(4.5 * columns, 3.2 * rows),
                            squeeze=False)
   colours = plt.get_cmap("viridis")
-  empty = (np.zeros((0, 2)), np.zeros((0,), np.int32))
   for ax, (title, scene, runs) in zip(axes.ravel(), cases):
-    draw_scene(ax, scene, *empty)
+    draw_scene(ax, scene)
     everything = np.concatenate([x for _, x in runs])
     finest = min(spacing for spacing, _ in runs)
     for k, (spacing, x) in enumerate(runs):

@@ -1,7 +1,8 @@
 """Two models' rollouts of one test trajectory beside the MPM's (the ramp
-and the obstacles drawn), at four frames up to the last, and their sand's mean speed near the end (the
-pictures docs/gns.md cites from rest_cleanrest_avg5_all/ and
-ft_rcr_clean10_avg3_all/):
+and the obstacles drawn), at four frames up to the last, and their sand's
+mean speed near the end (the pictures docs/gns.md cites from
+rest_cleanrest_avg5_all/, ft_rcr_clean10_avg3_all/ and
+ft_rcr_quiet_avg3_all/):
 
   python docs/results/compare_rollouts.py INDEX OUT.png MODEL_A MODEL_B \
       [YMAX [XMIN XMAX]]
@@ -49,7 +50,7 @@ for row, workdir in enumerate(models):
   for ax, step in zip(axes[row], (len(x) // 3, 2 * len(x) // 3,
                                   len(x) - 30, len(x) - 1)):
     f = frames[step]
-    figures.draw_scene(ax, t.scene, *[np.zeros((0, 2)), np.zeros((0,), int)])
+    figures.draw_scene(ax, t.scene)
     ax.scatter(*t.positions[f].T, s=3, c="k", label="MPM")
     ax.scatter(*x[step].T, s=3, c="r", label="GNS")
     ax.set_xlim(*xlim)

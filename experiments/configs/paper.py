@@ -68,8 +68,8 @@ def get_config() -> ml_collections.ConfigDict:
   # 0.1 mm per stored frame); the moving ones all keep their noise.
   config.train.clean_resting_only = False
   # The clean windows' loss counts this many times: their targets (exact
-  # rest) are small beside the moving windows', and the deposit's jitter
-  # is the misfit of exactly them (docs/gns.md).
+  # rest) are small beside the moving windows'. 10 did not lower the rest
+  # floor, and from scratch it raised it (docs/gns.md).
   config.train.clean_weight = 1.0
   # 0: those windows get no noise; m > 0: their noise std is scaled by a
   # factor drawn log-uniformly in [m, 1] per window (noise.quiet_scale),

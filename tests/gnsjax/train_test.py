@@ -519,20 +519,17 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
 
 class CleanWeightTest(fixtures.TinyRunTestCase):
 
-  def _trainer_and_batch(self, **options):
-    return _trainer_and_batch(self.data, **options)
-
   def test_the_weight_falls_on_exactly_the_windows_left_clean(self):
     key = jax.random.key(3)
-    trainer, batch = self._trainer_and_batch(clean_fraction=1.0,
-                                             clean_resting_only=True,
-                                             clean_weight=10.0)
+    trainer, batch = _trainer_and_batch(self.data, clean_fraction=1.0,
+                                        clean_resting_only=True,
+                                        clean_weight=10.0)
     np.testing.assert_array_equal(trainer.window_weights(batch, key),
                                   np.where(np.isin(np.arange(8), (2, 5)),
                                            10.0, 1.0))
     # Drawn at random: the same draw as batch_arrays' noise.
-    trainer, batch = self._trainer_and_batch(clean_fraction=0.5,
-                                             clean_weight=4.0)
+    trainer, batch = _trainer_and_batch(self.data, clean_fraction=0.5,
+                                        clean_weight=4.0)
     weights = np.asarray(trainer.window_weights(batch, key))
     graphs, _ = trainer.batch_arrays(batch, key)
     c = trainer.problem.input_frames
@@ -542,11 +539,11 @@ class CleanWeightTest(fixtures.TinyRunTestCase):
     np.testing.assert_array_equal(weights, np.where(clean, 4.0, 1.0))
     # Without a weight (or without clean windows) all weigh the same.
     for options in ({"clean_fraction": 0.5}, {"clean_weight": 4.0}):
-      trainer, batch = self._trainer_and_batch(**options)
+      trainer, batch = _trainer_and_batch(self.data, **options)
       self.assertIsNone(trainer.window_weights(batch, key))
 
   def test_the_loss_weighs_each_window_by_its_weight(self):
-    trainer, batch = self._trainer_and_batch()
+    trainer, batch = _trainer_and_batch(self.data)
     graphs, target = trainer.batch_arrays(batch, jax.random.key(3))
     params = trainer.init_state(0).params
     b = target.shape[0]
