@@ -5,7 +5,7 @@ the errors it will make in its own rollouts. The velocity noise is a random
 walk over the C - 1 input velocities whose last step has standard deviation
 ``noise_std`` (m/frame); positions get its running sum. The target is moved
 with the last input position, so the model is asked to undo the velocity
-noise (``adjust_target``). Some windows may be left clean
+noise (``gnsjax.simulator.shift_target``). Some windows may be left clean
 (``clean_windows``): sand exactly at rest, with its exact zero target,
 which noisy windows never show; or quiet, with noise of every amplitude
 down to the rollout's jitter at rest (``quiet_scale``; docs/gns.md).
@@ -28,11 +28,6 @@ def random_walk(key: jax.Array, shape: tuple[int, int, int],
   velocity_noise = jnp.cumsum(increments, axis=0)
   return jnp.concatenate([jnp.zeros((1,) + tuple(shape[1:])),
                           jnp.cumsum(velocity_noise, axis=0)])
-
-
-def adjust_target(target: jax.Array, noise: jax.Array) -> jax.Array:
-  """Target [N, 2] shifted with the last input frame's noise [C, N, 2]."""
-  return target + noise[-1]
 
 
 # A window's sand rests below this mean speed (m per stored frame): 0.1 mm,

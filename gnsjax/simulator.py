@@ -171,10 +171,19 @@ def add_noise(key: jax.Array, window: jax.Array, moving: jax.Array,
   inputs, target = window[:-1], window[-1]
   n = noise_lib.random_walk(key, inputs.shape, noise_std)
   n = n * moving[None, :, None]
-  target = noise_lib.adjust_target(target, n)
+  return inputs + n, shift_target(target, n[-1], moving, solids)
+
+
+def shift_target(target: jax.Array, offset: jax.Array, moving: jax.Array,
+                 solids: geometry.SDFGrid | None = None) -> jax.Array:
+  """A true frame [N, 2] moved by the last input frame's noise ``offset``
+  [N, 2] (``add_noise``), and with ``solids`` pushed back out to their
+  surface. Pushforward's target is the true frame P steps on moved so:
+  the noise shifts every later frame, as in LagrangeBench."""
+  target = target + offset
   if solids is not None:
     target, _, _ = constrain(target, target, moving, solids)
-  return inputs + n, target
+  return target
 
 
 def loss(model, params, graph: Graph, target: jax.Array, context: Context,

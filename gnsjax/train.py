@@ -150,6 +150,9 @@ class Trainer:
               {"loss": loss, "grad_norm": optax.global_norm(grads)})
 
     self.prepare = jax.jit(prepare)
+    self._shift_target = jax.jit(jax.vmap(
+        lambda t, o, m, s: simulator.shift_target(t, o, m,
+                                                  s if outside else None)))
     self._clean_windows = jax.jit(clean_windows)
     self.eval_loss = jax.jit(batch_loss)
     self.train_step = jax.jit(train_step, donate_argnums=0)
@@ -267,8 +270,9 @@ class Trainer:
     (``params``) first rolls the first C frames (noisy if ``noise``) P
     steps on, without gradient and with the solid constraint, as in a
     rollout; its own predictions are then the inputs, and the true frame P
-    steps later the target, so the model learns to correct the errors it
-    makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
+    steps later, moved by the start's noise, the target, so the model
+    learns to correct the errors it makes in its own rollouts (Brandstetter
+    et al. 2022, LagrangeBench).
     """
     put = self.put
     c = self.problem.input_frames
@@ -283,9 +287,11 @@ class Trainer:
     else:
       inputs, target = window[:, :-1], window[:, -1]
     if pushforward:
+      offset = inputs[:, -1] - window[:, -2]
       inputs = self._push_forward(params, inputs, types, moving, solids,
                                   pushforward)
-      target = positions[:, c + pushforward]
+      target = self._shift_target(positions[:, c + pushforward], offset,
+                                  moving, solids)
     senders, receivers = self.graph_edges(inputs[:, -1])
     graphs = simulator.Graph(inputs, types, moving, put(senders),
                              put(receivers), solids)

@@ -387,6 +387,30 @@ class PushforwardTest(fixtures.TinyRunTestCase):
     np.testing.assert_array_equal(graphs.positions, batch.positions[:, p:-1])
     np.testing.assert_array_equal(target, batch.positions[:, -1])
 
+  def test_a_noisy_start_moves_the_target_with_its_noise(self):
+    # The noise shifts the start's positions; the model learns to keep that
+    # shift, so the true frame P steps on is moved by it too (LagrangeBench).
+    p = self.P
+    config = fixtures.tiny_config(noise_std=1e-3, pushforward_steps=p,
+                                  pushforward_probability=1.0)
+    problem = run_lib.load_problem(self.data, config)
+    c = problem.input_frames
+    trainer = train.Trainer(config, problem)
+    state = trainer.init_state(0)
+    with data.WindowDataset(data.split_path(self.data, "train"),
+                            input_frames=c + p, seed=0) as ds:
+      batch = trainer.make_batch([ds[0], ds[1]])
+    key = jax.random.key(3)
+    _, target = trainer.batch_arrays(batch, key, params=state.params,
+                                     pushforward=p)
+    solids = geometry.SDFGrid(trainer.put(batch.solids), problem.sdf_spacing)
+    start, _ = trainer.prepare(key, trainer.put(batch.positions[:, :c + 1]),
+                               trainer.put(batch.moving), solids)
+    offset = np.asarray(start[:, -1]) - batch.positions[:, c - 1]
+    self.assertGreater(np.max(np.abs(offset)), 5e-4)
+    np.testing.assert_allclose(target, batch.positions[:, c + p] + offset,
+                               atol=1e-6)
+
 
 class TargetOutsideSolidsTest(fixtures.TinyRunTestCase):
 
