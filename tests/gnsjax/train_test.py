@@ -333,6 +333,19 @@ class PushforwardTest(fixtures.TinyRunTestCase):
 
   P = 2
 
+  def _pushforward_batch(self, **options):
+    """(problem, trainer, initial state, a batch of two windows of C + P
+    + 1 frames) of a tiny run that always pushes forward P steps."""
+    config = fixtures.tiny_config(pushforward_steps=self.P,
+                                  pushforward_probability=1.0, **options)
+    problem = run_lib.load_problem(self.data, config)
+    trainer = train.Trainer(config, problem)
+    with data.WindowDataset(data.split_path(self.data, "train"),
+                            input_frames=problem.input_frames + self.P,
+                            seed=0) as ds:
+      batch = trainer.make_batch([ds[0], ds[1]])
+    return problem, trainer, trainer.init_state(0), batch
+
   def test_probability_zero_changes_nothing(self):
     losses = {}
     for steps in (0, self.P):
@@ -349,15 +362,8 @@ class PushforwardTest(fixtures.TinyRunTestCase):
 
   def test_inputs_are_the_models_own_rollout(self):
     p = self.P
-    config = fixtures.tiny_config(pushforward_steps=p,
-                                  pushforward_probability=1.0)
-    problem = run_lib.load_problem(self.data, config)
+    problem, trainer, state, batch = self._pushforward_batch()
     c = problem.input_frames
-    trainer = train.Trainer(config, problem)
-    state = trainer.init_state(0)
-    with data.WindowDataset(data.split_path(self.data, "train"),
-                            input_frames=c + p, seed=0) as ds:
-      batch = trainer.make_batch([ds[0], ds[1]])
     self.assertEqual(batch.positions.shape[1], c + p + 1)
     graphs, target = trainer.batch_arrays(batch, None, noise=False,
                                           params=state.params, pushforward=p)
@@ -391,15 +397,8 @@ class PushforwardTest(fixtures.TinyRunTestCase):
     # The noise shifts the start's positions; the model learns to keep that
     # shift, so the true frame P steps on is moved by it too (LagrangeBench).
     p = self.P
-    config = fixtures.tiny_config(noise_std=1e-3, pushforward_steps=p,
-                                  pushforward_probability=1.0)
-    problem = run_lib.load_problem(self.data, config)
+    problem, trainer, state, batch = self._pushforward_batch(noise_std=1e-3)
     c = problem.input_frames
-    trainer = train.Trainer(config, problem)
-    state = trainer.init_state(0)
-    with data.WindowDataset(data.split_path(self.data, "train"),
-                            input_frames=c + p, seed=0) as ds:
-      batch = trainer.make_batch([ds[0], ds[1]])
     key = jax.random.key(3)
     _, target = trainer.batch_arrays(batch, key, params=state.params,
                                      pushforward=p)
