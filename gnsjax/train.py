@@ -268,8 +268,8 @@ class Trainer:
     of the config, 0 without). Without ``pushforward`` the last C + 1 frames
     are the inputs and the target. With ``pushforward`` = P, the model
     (``params``) first rolls the first C frames (noisy if ``noise``) P
-    steps on, without gradient and with the solid constraint, as in a
-    rollout; its own predictions are then the inputs, and the true frame P
+    steps on, without gradient, with the solid constraint as in a rollout
+    unless ``train.pushforward_constrained`` is off; its own predictions are then the inputs, and the true frame P
     steps later, moved by the start's noise, the target, so the model
     learns to correct the errors it makes in its own rollouts (Brandstetter
     et al. 2022, LagrangeBench).
@@ -322,8 +322,8 @@ class Trainer:
     while True:  # the overflow policy of gnsjax.graph: rerun, grown
       positions, carried, overflow, nbrs, _ = self._unroll(
           params, rollout_lib.SceneNodes(window, types, moving, solids),
-          nbrs, self.problem.context, spec=spec, length=steps, project=True,
-          batched=True)
+          nbrs, self.problem.context, spec=spec, length=steps,
+          project=self.config.train.pushforward_constrained, batched=True)
       if not bool(jnp.any(overflow)):
         break
       # Size the list from every step's frames (the steps after an

@@ -58,6 +58,9 @@ def get_config() -> ml_collections.ConfigDict:
   # inputs this many steps on (no gradient) and learns from its own output.
   config.train.pushforward_steps = 0
   config.train.pushforward_probability = 0.0
+  # The pushforward steps use the solid constraint, as a rollout does; off,
+  # the model sees (and learns to leave) its own steps into a solid.
+  config.train.pushforward_constrained = True
   # Noisy targets pushed out of the solids (simulator.add_noise): the model
   # learns to step out of a solid instead of staying inside.
   config.train.target_outside_solids = False

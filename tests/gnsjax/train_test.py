@@ -393,6 +393,42 @@ class PushforwardTest(fixtures.TinyRunTestCase):
     np.testing.assert_array_equal(graphs.positions, batch.positions[:, p:-1])
     np.testing.assert_array_equal(target, batch.positions[:, -1])
 
+  def test_the_unconstrained_unroll_is_the_rollout_without_projection(self):
+    # Off, the model's own steps into a solid stay in its inputs, so it
+    # learns to leave a solid rather than lean on the constraint.
+    p = self.P
+    key = jax.random.key(3)
+    for constrained in (True, False):
+      # Noise of 3 mm per step: sand near the ramp starts inside it.
+      problem, trainer, state, batch = self._pushforward_batch(
+          noise_std=3e-3, pushforward_constrained=constrained)
+      c = problem.input_frames
+      graphs, _ = trainer.batch_arrays(batch, key, params=state.params,
+                                       pushforward=p)
+      last = np.asarray(graphs.positions[:, -1])
+      start, _ = trainer.prepare(
+          key, trainer.put(batch.positions[:, :c + 1]),
+          trainer.put(batch.moving),
+          geometry.SDFGrid(trainer.put(batch.solids), problem.sdf_spacing))
+      inside = 0
+      for b in range(len(batch.moving)):
+        solids = geometry.SDFGrid(jnp.asarray(batch.solids[b]),
+                                  problem.sdf_spacing)
+        scene = rollout.SceneNodes(np.asarray(start[b]),
+                                   batch.particle_type[b], batch.moving[b],
+                                   solids)
+        own = rollout.rollout(simulator.ModelPredictor(trainer.model),
+                              state.params, scene, p, problem.context,
+                              problem.spec, project=constrained)
+        np.testing.assert_allclose(last[b], own.positions[-1], atol=1e-6,
+                                   err_msg=f"constrained={constrained}")
+        sdf, _ = geometry.sample_sdf(solids, jnp.asarray(last[b]))
+        inside += np.sum(batch.moving[b] & (np.asarray(sdf) < -1e-5))
+      if constrained:
+        self.assertEqual(inside, 0)
+      else:
+        self.assertGreater(inside, 0)
+
   def test_a_noisy_start_moves_the_target_with_its_noise(self):
     # The noise shifts the start's positions; the model learns to keep that
     # shift, so the true frame P steps on is moved by it too (LagrangeBench).
