@@ -106,6 +106,10 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
           pred, t.positions, times,
           np.arange(len(t.positions)) * scene.frame_dt, REST_WINDOW_S),
       "pushed_fraction": out.pushed / n,
+      # The constraint's work once the sand should rest: a deposit held up
+      # by it, not by the model, shows here.
+      "rest_pushed_fraction": float(np.mean(
+          out.pushed[times >= times[-1] - REST_WINDOW_S]) / n),
       "pushed_depth": out.depth,
   }
 
@@ -214,6 +218,7 @@ def per_trajectory_row(r: dict) -> dict:
       "max_outside_domain": float(np.max(r["outside_domain"])),
       "mpm_max_inside_solids": float(np.max(r["mpm_inside_solids"])),
       "mean_pushed_fraction": float(np.mean(r["pushed_fraction"])),
+      "rest_pushed_fraction": r["rest_pushed_fraction"],
       "max_pushed_depth": float(np.max(r["pushed_depth"])),
       "final_speed": r["final_speed"],
       "mpm_final_speed": r["mpm_final_speed"],
@@ -274,6 +279,9 @@ def group_summary(rows: Sequence[dict]) -> list[dict]:
         "median_final_speed": float(np.median(col("final_speed"))),
         "median_mpm_final_speed": float(np.median(col("mpm_final_speed"))),
     }
+    if len(col("rest_pushed_fraction")):
+      entry["mean_rest_pushed_fraction"] = float(np.mean(
+          col("rest_pushed_fraction")))
     if len(col("kinetic_energy_ratio")):
       entry["median_kinetic_energy_ratio"] = float(np.median(
           col("kinetic_energy_ratio")))
@@ -445,6 +453,12 @@ def _free(row: dict, key: str) -> str:
   return f"{row[key]:.1%}" if key in row else "not run"
 
 
+def _rest_pushed(group: dict) -> str:
+  """The constraint's share at rest, or "" (rows from before it existed)."""
+  value = group.get("mean_rest_pushed_fraction")
+  return "" if value is None else f"{value:.2%}"
+
+
 def _held(group: dict) -> str:
   """``hold_rest``'s medians, or "not run" (``--rest_steps=0``)."""
   if "median_held_speed" not in group:
@@ -470,12 +484,14 @@ def report(summary: dict[str, Any]) -> str:
       "Inside: fraction of the sand deeper than half a particle spacing in "
       "the ramp or an obstacle (max over steps and trajectories); 'free': a "
       "rollout of the same model without the solid constraint. Pushed: mean "
-      "fraction of the sand the constraint moved per step, and the deepest "
-      "push. Front error: |front_GNS - front_MPM| at the last frame over the "
-      "MPM's runout distance (median). Speed at the end: the sand's mean "
-      "speed over the last 5 steps, GNS / MPM (median): a deposit that "
-      "jitters instead of resting shows here. Kinetic energy: the sand's "
-      f"over the last {REST_WINDOW_S:g} s, GNS over MPM (median and worst; "
+      "fraction of the sand the constraint moved per step (over the whole "
+      f"rollout / over its last {REST_WINDOW_S:g} s, when the sand should "
+      "rest), and the deepest push. Front error: |front_GNS - front_MPM| "
+      "at the last frame over the MPM's runout distance (median). Speed at "
+      "the end: the sand's mean speed over the last 5 steps, GNS / MPM "
+      "(median): a deposit that jitters instead of resting shows here. "
+      "Kinetic energy: the sand's over the last "
+      f"{REST_WINDOW_S:g} s, GNS over MPM (median and worst; "
       "1 rests as the MPM does). Held: the same model started from the "
       f"MPM's last frames (its deposit) for {summary.get('rest_steps', 0)} "
       "learned steps, the sand's "
@@ -485,9 +501,9 @@ def report(summary: dict[str, Any]) -> str:
       "and no earlier test scene (without obstacles a scene is set by its "
       "sand box alone, so such scenes repeat; docs/dataset.md).", "",
       "| group | n | mean MSE (m^2) | const. vel. | front error | deposit "
-      "error (m) | inside | outside | free: inside | pushed/step | deepest "
-      "push (m) | speed at end (cm/s) | kinetic energy ratio | held: speed "
-      "(cm/s) / drift (mm) |",
+      "error (m) | inside | outside | free: inside | pushed/step (all / "
+      "rest) | deepest push (m) | speed at end (cm/s) | kinetic energy "
+      "ratio | held: speed (cm/s) / drift (mm) |",
       "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in summary["groups"]:
     lines.append(
@@ -497,7 +513,8 @@ def report(summary: dict[str, Any]) -> str:
         f"{g['median_deposit_error']:.4f} | {g['max_inside_solids']:.1%} | "
         f"{g['max_outside_domain']:.1%} | "
         f"{_free(g, 'free_max_inside_solids')} | "
-        f"{g['mean_pushed_fraction']:.2%} | {g['max_pushed_depth']:.4f} | "
+        f"{g['mean_pushed_fraction']:.2%} / {_rest_pushed(g)} | "
+        f"{g['max_pushed_depth']:.4f} | "
         f"{100 * g['median_final_speed']:.1f} / "
         f"{100 * g['median_mpm_final_speed']:.1f} | "
         f"{_ratio(g.get('median_kinetic_energy_ratio'))} / "

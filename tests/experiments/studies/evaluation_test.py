@@ -5,6 +5,7 @@ and report."""
 import json
 import os
 import tempfile
+from unittest import mock
 
 from absl.testing import absltest
 import numpy as np
@@ -81,6 +82,12 @@ class ScoreTest(absltest.TestCase):
         rtol=1e-4)
     np.testing.assert_array_equal(s["pushed_fraction"], pushed / 4)
     np.testing.assert_array_equal(s["pushed_depth"], depth)
+    # At rest: the steps in the last REST_WINDOW_S (here all of them; with
+    # a window of 5 frames the last three steps, frames 10-14).
+    self.assertAlmostEqual(s["rest_pushed_fraction"], 3 / 20)
+    with mock.patch.object(evaluation, "REST_WINDOW_S", 5 * SCENE.frame_dt):
+      s = evaluation.score(t, out, frames, problem(c, k))
+    self.assertAlmostEqual(s["rest_pushed_fraction"], 2 / 12)
     np.testing.assert_array_equal(s["inside_solids"], 0.0)
     np.testing.assert_array_equal(s["outside_domain"], 0.0)
 
