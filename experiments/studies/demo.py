@@ -68,10 +68,27 @@ class Settings(settings.Base):
                            names=names) for p in plan]
 
 
+# How the shipped model's training windows were made (noise, clean
+# windows, pushforward): its fine-tuning keeps them. Fine-tuned another
+# way, even for 200 steps, it drifts from what it learned (a fine-tuning
+# without its pushforward doubled its error on the demo's scene:
+# docs/results.md, the demo).
+RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
+               "motion_weighting", "target_outside_solids", "clean_fraction",
+               "clean_resting_only", "clean_weight", "clean_scale_min",
+               "pushforward_steps", "pushforward_probability",
+               "pushforward_constrained")
+
+
 def demo_config(num_train: int, num_test: int, steps: int,
-                num_frames: int = 600):
-  """configs/small.py with a demo-sized dataset and a short training."""
+                num_frames: int = 600, recipe: dict | None = None):
+  """configs/small.py with a demo-sized dataset and a short training, with
+  the ``RECIPE_KEYS`` that ``recipe`` (a shipped model's ``config.train``)
+  holds."""
   config = small.get_config()
+  for key in RECIPE_KEYS:
+    if recipe is not None and key in recipe:
+      config.train[key] = recipe[key]
   config.dataset.num_frames = num_frames
   config.dataset.num_train = num_train
   config.dataset.num_test = num_test
@@ -139,12 +156,13 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   data_dir = os.path.join(out_dir, "data")
   workdir = os.path.join(out_dir, "run")
   os.makedirs(workdir, exist_ok=True)
-  start = 0
+  start, recipe = 0, None
   if s.pretrained and os.path.isdir(os.path.join(settings.PRETRAINED,
                                                  "checkpoints")):
     start = ship_checkpoint(settings.PRETRAINED, workdir)
+    recipe = run_lib.load_run(settings.PRETRAINED).config.train.to_dict()
   config = demo_config(s.num_train, _NUM_TEST, start + s.finetune_steps,
-                       s.num_frames)
+                       s.num_frames, recipe)
   spec = dataset.DatasetSpec(**config.dataset.to_dict())
   with tqdm.tqdm(total=spec.num_train + spec.num_test, unit="traj",
                  desc="dataset") as bar:

@@ -36,6 +36,23 @@ class PretrainedTest(absltest.TestCase):
     self.assertEqual(run.problem.frame_stride,
                      provenance["config"]["train"]["frame_stride"])
 
+  def test_the_fine_tuning_keeps_the_shipped_models_recipe(self):
+    shipped = run_lib.load_run(settings.PRETRAINED).config.train.to_dict()
+    config = demo.demo_config(4, 1, 5200, recipe=shipped)
+    plain = demo.demo_config(4, 1, 5200)
+    for key in demo.RECIPE_KEYS:
+      if key in shipped:
+        self.assertEqual(config.train[key], shipped[key], key)
+    # Only the recipe: the demo's own data, length and rate stay.
+    for section in ("dataset", "model", "checkpoint", "eval"):
+      self.assertEqual(config[section].to_dict(), plain[section].to_dict())
+    self.assertEqual(config.train.num_steps, 5200)
+    self.assertEqual(config.train.lr_init, 1.5e-5)
+    # The shipped model trained with pushforward, which the small config
+    # leaves off: the recipe is not the small config's.
+    self.assertGreater(config.train.pushforward_steps, 0)
+    self.assertEqual(plain.train.pushforward_steps, 0)
+
   def test_demo_refuses_a_run_of_another_shipped_model(self):
     # After the shipped model changes, a demo's old work directory would
     # resume its own run and show the old model: refused, naming it.
