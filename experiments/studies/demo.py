@@ -71,7 +71,7 @@ class Settings(settings.Base):
 # How the shipped model's training windows were made (noise, clean
 # windows, pushforward): its fine-tuning keeps them. Fine-tuned another
 # way, even for 200 steps, it drifts from what it learned (a fine-tuning
-# without its pushforward doubled its error on the demo's scene:
+# without its pushforward raised its error on the demo's scene 2.7-fold:
 # docs/results.md, the demo).
 RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
                "motion_weighting", "target_outside_solids", "clean_fraction",

@@ -106,8 +106,9 @@ def score(t: mpm_io.Trajectory, out: rollout_lib.Rollout,
           pred, t.positions, times,
           np.arange(len(t.positions)) * scene.frame_dt, REST_WINDOW_S),
       "pushed_fraction": out.pushed / n,
-      # The constraint's work once the sand should rest: a deposit held up
-      # by it, not by the model, shows here.
+      # The constraint's work once the sand should rest (a count: how deep
+      # it pushes, and whether the deposit needs it, docs/results/
+      # rest_contact.py measures).
       "rest_pushed_fraction": float(np.mean(
           out.pushed[times >= times[-1] - REST_WINDOW_S]) / n),
       "pushed_depth": out.depth,
