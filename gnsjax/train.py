@@ -269,10 +269,10 @@ class Trainer:
     are the inputs and the target. With ``pushforward`` = P, the model
     (``params``) first rolls the first C frames (noisy if ``noise``) P
     steps on, without gradient, with the solid constraint as in a rollout
-    unless ``train.pushforward_constrained`` is off; its own predictions are then the inputs, and the true frame P
-    steps later, moved by the start's noise, the target, so the model
-    learns to correct the errors it makes in its own rollouts (Brandstetter
-    et al. 2022, LagrangeBench).
+    unless ``train.pushforward_constrained`` is off; its own predictions
+    are then the inputs, and the true frame P steps later, moved by the
+    start's noise, the target, so the model learns to correct the errors it
+    makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
     """
     put = self.put
     c = self.problem.input_frames

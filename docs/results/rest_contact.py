@@ -21,19 +21,19 @@ import sys
 
 import numpy as np
 
+from experiments.studies import evaluation
 from gnsjax import data
 from gnsjax import metrics
 from gnsjax import rollout
 from gnsjax import run as run_lib
 
 DEPTHS_M = (1e-4, 5e-4, 1e-3, 2e-3)
-REST_WINDOW_S = 0.25
 
 
 def deeper_than(positions, scene):
   """Fraction of the sand [N, 2] deeper than each of DEPTHS_M in a solid."""
-  distance = metrics.solid_distance(positions, scene)
-  return [float(np.mean(distance < -depth)) for depth in DEPTHS_M]
+  return [float(metrics.inside_solids(positions, scene, depth))
+          for depth in DEPTHS_M]
 
 
 def main(every, model_dirs):
@@ -55,7 +55,7 @@ def main(every, model_dirs):
       for t in trajectories:
         frames = rollout.predicted_frame_indices(len(t.positions), c, k)
         times = frames * t.scene.frame_dt
-        late = times >= times[-1] - REST_WINDOW_S
+        late = times >= times[-1] - evaluation.REST_WINDOW_S
         out = rollout.rollout_trajectory(run.model, run.params, t,
                                          run.problem, project=project)
         sand = out.positions.shape[1]

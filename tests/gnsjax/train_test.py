@@ -346,6 +346,15 @@ class PushforwardTest(fixtures.TinyRunTestCase):
       batch = trainer.make_batch([ds[0], ds[1]])
     return problem, trainer, trainer.init_state(0), batch
 
+  def _noisy_start(self, problem, trainer, batch, key):
+    """The noisy first C frames [B, C, N, 2] that ``batch_arrays`` draws
+    with ``key`` and pushes forward."""
+    c = problem.input_frames
+    solids = geometry.SDFGrid(trainer.put(batch.solids), problem.sdf_spacing)
+    start, _ = trainer.prepare(key, trainer.put(batch.positions[:, :c + 1]),
+                               trainer.put(batch.moving), solids)
+    return np.asarray(start)
+
   def test_probability_zero_changes_nothing(self):
     losses = {}
     for steps in (0, self.P):
@@ -402,21 +411,16 @@ class PushforwardTest(fixtures.TinyRunTestCase):
       # Noise of 3 mm per step: sand near the ramp starts inside it.
       problem, trainer, state, batch = self._pushforward_batch(
           noise_std=3e-3, pushforward_constrained=constrained)
-      c = problem.input_frames
       graphs, _ = trainer.batch_arrays(batch, key, params=state.params,
                                        pushforward=p)
       last = np.asarray(graphs.positions[:, -1])
-      start, _ = trainer.prepare(
-          key, trainer.put(batch.positions[:, :c + 1]),
-          trainer.put(batch.moving),
-          geometry.SDFGrid(trainer.put(batch.solids), problem.sdf_spacing))
+      start = self._noisy_start(problem, trainer, batch, key)
       inside = 0
       for b in range(len(batch.moving)):
         solids = geometry.SDFGrid(jnp.asarray(batch.solids[b]),
                                   problem.sdf_spacing)
-        scene = rollout.SceneNodes(np.asarray(start[b]),
-                                   batch.particle_type[b], batch.moving[b],
-                                   solids)
+        scene = rollout.SceneNodes(start[b], batch.particle_type[b],
+                                   batch.moving[b], solids)
         own = rollout.rollout(simulator.ModelPredictor(trainer.model),
                               state.params, scene, p, problem.context,
                               problem.spec, project=constrained)
@@ -438,10 +442,8 @@ class PushforwardTest(fixtures.TinyRunTestCase):
     key = jax.random.key(3)
     _, target = trainer.batch_arrays(batch, key, params=state.params,
                                      pushforward=p)
-    solids = geometry.SDFGrid(trainer.put(batch.solids), problem.sdf_spacing)
-    start, _ = trainer.prepare(key, trainer.put(batch.positions[:, :c + 1]),
-                               trainer.put(batch.moving), solids)
-    offset = np.asarray(start[:, -1]) - batch.positions[:, c - 1]
+    start = self._noisy_start(problem, trainer, batch, key)
+    offset = start[:, -1] - batch.positions[:, c - 1]
     self.assertGreater(np.max(np.abs(offset)), 5e-4)
     np.testing.assert_allclose(target, batch.positions[:, c + p] + offset,
                                atol=1e-6)
