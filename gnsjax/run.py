@@ -171,6 +171,27 @@ class Run(NamedTuple):
   config: ml_collections.ConfigDict
 
 
+def _open(workdir: str, step: int | None):
+  """(manager, step): ``step`` or, when None, the latest checkpoint's."""
+  mngr = checkpoint.manager(workdir, every_steps=1)
+  step = mngr.latest_step() if step is None else step
+  if step is None:
+    mngr.close()
+    raise FileNotFoundError(f"{workdir}: no checkpoint to restore")
+  return mngr, step
+
+
+def load_config(workdir: str, step: int | None = None
+                ) -> ml_collections.ConfigDict:
+  """The config a run's checkpoint (default: the latest) was trained with,
+  read without restoring any array."""
+  mngr, step = _open(workdir, step)
+  try:
+    return ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
+  finally:
+    mngr.close()
+
+
 def load_run(workdir: str, step: int | None = None) -> Run:
   """A run's checkpoint (default: the latest), restored on its own.
 
@@ -178,11 +199,7 @@ def load_run(workdir: str, step: int | None = None) -> Run:
   radius), so a work directory, or a shipped model such as
   ``experiments/pretrained/small``, needs no dataset to restore.
   """
-  mngr = checkpoint.manager(workdir, every_steps=1)
-  step = mngr.latest_step() if step is None else step
-  if step is None:
-    mngr.close()
-    raise FileNotFoundError(f"{workdir}: no checkpoint to restore")
+  mngr, step = _open(workdir, step)
   config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
   problem = problem_from_dict(config, checkpoint.read_stats(mngr, step))
   model = create_model(config.model)

@@ -160,7 +160,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   if s.pretrained and os.path.isdir(os.path.join(settings.PRETRAINED,
                                                  "checkpoints")):
     start = ship_checkpoint(settings.PRETRAINED, workdir)
-    recipe = run_lib.load_run(settings.PRETRAINED).config.train.to_dict()
+    recipe = run_lib.load_config(settings.PRETRAINED).train.to_dict()
   config = demo_config(s.num_train, _NUM_TEST, start + s.finetune_steps,
                        s.num_frames, recipe)
   spec = dataset.DatasetSpec(**config.dataset.to_dict())

@@ -63,6 +63,17 @@ class DamagedCheckpointTest(absltest.TestCase):
                                 r"3 is damaged: config/metadata missing"):
       run_lib.load_run(self.dir)
 
+  def test_load_config_reads_no_array(self):
+    # These checkpoints hold no model or statistics: load_run cannot
+    # restore them, their configs read all the same.
+    with self.assertRaises(KeyError):
+      run_lib.load_run(self.dir)
+    self.assertEqual(run_lib.load_config(self.dir).to_dict(), {"a": 1})
+    self.assertEqual(run_lib.load_config(self.dir, step=1).to_dict(),
+                     {"a": 1})
+    with self.assertRaisesRegex(FileNotFoundError, "no checkpoint"):
+      run_lib.load_config(os.path.join(self.dir, "empty"))
+
   def test_resuming_sets_the_damaged_ones_aside(self):
     self._delete_data(3)
     # Step 2 keeps its files but one is cut short: found by reading it.
