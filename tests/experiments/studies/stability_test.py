@@ -125,7 +125,24 @@ class CasesTest(absltest.TestCase):
     self.assertEqual(row["mpm_final_speed_m_s"], 0.0)
     self.assertEqual(row["mpm_rest_time_s"], round(SCENE.frame_dt, 3))
     self.assertAlmostEqual(row["travel_ratio"], 0.104 / 0.2, places=3)
+    self.assertAlmostEqual(row["centre_travel_ratio"], 0.104 / 0.2,
+                           places=3)
     self.assertEqual(set(row), set(stability.AGAINST_MPM))
+
+  def test_a_sheet_that_leaves_the_bulk_behind(self):
+    # Only the tenth of the sand furthest down the slope follows the MPM's
+    # 20 cm: the front travels as far, the centre a tenth as far.
+    frames = np.arange(6)
+    start = _resting(1)[0]
+    mpm_run = _resting(6)
+    mpm_run[1:] -= [0.2, 0.0]
+    learned = _resting(6)
+    sheet = start[:, 0] <= np.quantile(start[:, 0], 0.1)
+    learned[1:, sheet] -= [0.2, 0.0]
+    row = stability.against_mpm(learned, mpm_run, start, frames, SCENE)
+    self.assertAlmostEqual(row["travel_ratio"], 1.0, places=3)
+    self.assertAlmostEqual(row["centre_travel_ratio"], sheet.mean(),
+                           places=3)
 
   def test_rows_of_a_run_a_blow_up_and_a_refused_scene(self):
     outcome = stability.run_mpm(stability.Case("tiny", "mpm", "",
