@@ -200,12 +200,14 @@ def load_run(workdir: str, step: int | None = None) -> Run:
   ``experiments/pretrained/small``, needs no dataset to restore.
   """
   mngr, step = _open(workdir, step)
-  config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
-  problem = problem_from_dict(config, checkpoint.read_stats(mngr, step))
-  model = create_model(config.model)
-  abstract = models.init_params(
-      model, jax.random.key(0),
-      features.num_node_features(config.train.input_frames))
-  params = checkpoint.restore_params(mngr, abstract, step)
-  mngr.close()
+  try:
+    config = ml_collections.ConfigDict(checkpoint.read_config(mngr, step))
+    problem = problem_from_dict(config, checkpoint.read_stats(mngr, step))
+    model = create_model(config.model)
+    abstract = models.init_params(
+        model, jax.random.key(0),
+        features.num_node_features(config.train.input_frames))
+    params = checkpoint.restore_params(mngr, abstract, step)
+  finally:
+    mngr.close()
   return Run(model, params, problem, int(step), config)

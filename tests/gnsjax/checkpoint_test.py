@@ -63,7 +63,7 @@ class DamagedCheckpointTest(absltest.TestCase):
                                 r"3 is damaged: config/metadata missing"):
       run_lib.load_run(self.dir)
 
-  def test_load_config_reads_no_array(self):
+  def test_load_config_needs_no_model(self):
     # These checkpoints hold no model or statistics: load_run cannot
     # restore them, their configs read all the same.
     with self.assertRaises(KeyError):
