@@ -141,6 +141,21 @@ def noise_std_of(train_config, stats: features.Stats) -> float:
   return float(train_config.noise_std)
 
 
+def fine_tuning_problem(parent: "Run", config) -> Problem:
+  """The problem a fine-tuning of ``parent`` trains on: the parent's
+  statistics (its weights are fit to them) and the config's training noise,
+  ``noise_velocity_fraction`` taken of the data's velocity std (the parent's
+  own noise unfolded from it), or ``noise_std``."""
+  stats = parent.problem.stats
+  if parent.config.train.get("fold_noise", False):
+    noise = parent.problem.noise_std
+    shrink = lambda std: np.sqrt(np.maximum(np.square(std) - noise**2, 0.0))
+    stats = stats._replace(vel_std=shrink(stats.vel_std),
+                           acc_std=shrink(stats.acc_std))
+  return dataclasses.replace(parent.problem,
+                             noise_std=noise_std_of(config.train, stats))
+
+
 def load_problem(data_dir: str, config) -> Problem:
   """The problem of a dataset: statistics at the config's frame stride (the
   noise folded in if ``train.fold_noise``), domain and radius (the model

@@ -455,8 +455,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   if stored is None and tcfg.init_from:
     start_from = run_lib.load_run(tcfg.init_from)
     config_lib.check_fine_tuning(start_from.config.to_dict(), config)
-    stored = start_from.problem.to_dict()
-  # A resumed (or fine-tuned) model keeps the statistics it was trained with.
+    stored = run_lib.fine_tuning_problem(start_from, config).to_dict()
+  # A resumed (or fine-tuned) model keeps the statistics it was trained with
+  # (a fine-tuning takes its noise from the config).
   problem = (run_lib.problem_from_dict(config, stored) if stored is not None
              else run_lib.load_problem(data_dir, config))
   trainer = Trainer(config, problem)

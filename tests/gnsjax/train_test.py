@@ -264,6 +264,29 @@ class TrainTest(fixtures.TinyRunTestCase):
       train.train_and_evaluate(other, self.data,
                                os.path.join(self.dir, "other"))
 
+  def test_fine_tuning_takes_its_noise_from_the_config(self):
+    # The parent's statistics (noise folded in), the config's noise: the
+    # same noise a run from scratch with that config would draw.
+    base = os.path.join(self.dir, "base")
+    config = fixtures.tiny_config(num_steps=1, noise_velocity_fraction=0.25,
+                                  fold_noise=True)
+    config.checkpoint.every_steps = 1
+    train.train_and_evaluate(config, self.data, base)
+    fine = fixtures.tiny_config(num_steps=1, init_from=base, lr_init=0.0,
+                                lr_min=0.0, noise_velocity_fraction=0.1,
+                                fold_noise=True)
+    fine.checkpoint.every_steps = 1
+    tuned = os.path.join(self.dir, "tuned")
+    train.train_and_evaluate(fine, self.data, tuned)
+    got, want = run_lib.load_run(tuned), run_lib.load_run(base)
+    for a, b in zip(got.problem.stats, want.problem.stats):
+      np.testing.assert_array_equal(a, b)
+    from_scratch = run_lib.load_problem(self.data, fine)
+    self.assertAlmostEqual(got.problem.noise_std / from_scratch.noise_std,
+                           1.0, places=5)
+    self.assertAlmostEqual(got.problem.noise_std / want.problem.noise_std,
+                           0.4, places=5)
+
   def test_checkpoints_before_smooth_cutoff_resume(self):
     # A run whose stored config predates the setting resumes (as 0, off).
     config = fixtures.tiny_config(num_steps=2)
