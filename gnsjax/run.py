@@ -81,6 +81,8 @@ class Problem:
     boundary_particles: whether boundary particles are graph nodes.
     sdf_spacing: node spacing of the scenes' SDF grids (m).
     noise_std: training noise, std of the last input velocity (m/step).
+    folded_noise_std: the noise folded into ``stats`` (m/step; 0 if none):
+      ``noise_std`` but in a fine-tuning that changed the noise.
   """
   stats: features.Stats
   spec: graph.GraphSpec
@@ -89,6 +91,7 @@ class Problem:
   boundary_particles: bool = True
   sdf_spacing: float = 0.005
   noise_std: float = 0.0
+  folded_noise_std: float = 0.0
 
   @property
   def radius(self) -> float:
@@ -110,26 +113,33 @@ class Problem:
     return {**{k: np.asarray(v).tolist()
                for k, v in self.stats._asdict().items()},
             "bounds": np.asarray(self.bounds).tolist(), "radius": self.radius,
-            "noise_std": self.noise_std}
+            "noise_std": self.noise_std,
+            "folded_noise_std": self.folded_noise_std}
 
 
 def _problem(config, stats: features.Stats, bounds, radius: float,
-             noise_std: float) -> Problem:
+             noise_std: float, folded_noise_std: float) -> Problem:
   bounds = np.asarray(bounds, np.float32)
   spec = graph.GraphSpec(radius, tuple(map(tuple, bounds.tolist())),
                          config.train.capacity_multiplier)
   m = config.model
   return Problem(stats, spec, config.train.input_frames,
                  config.train.frame_stride, m.boundary_particles,
-                 float(m.sdf_spacing or radius / 6), float(noise_std))
+                 float(m.sdf_spacing or radius / 6), float(noise_std),
+                 float(folded_noise_std))
 
 
 def problem_from_dict(config, stored: dict) -> Problem:
   """The problem a checkpoint was trained on (``Problem.to_dict``)."""
   stats = features.Stats(*(np.asarray(stored[k], np.float32)
                            for k in features.Stats._fields))
+  noise = float(stored["noise_std"])
+  # Stored before fine-tunings could change the noise: the noise folded in
+  # is the training noise.
+  folded = float(stored.get("folded_noise_std",
+                            noise if config.train.fold_noise else 0.0))
   return _problem(config, stats, stored["bounds"], float(stored["radius"]),
-                  float(stored["noise_std"]))
+                  noise, folded)
 
 
 def noise_std_of(train_config, stats: features.Stats) -> float:
@@ -146,12 +156,11 @@ def fine_tuning_problem(parent: "Run", config) -> Problem:
   statistics (its weights are fit to them) and the config's training noise,
   ``noise_velocity_fraction`` taken of the data's velocity std (the parent's
   own noise unfolded from it), or ``noise_std``."""
+  noise = parent.problem.folded_noise_std
+  shrink = lambda std: np.sqrt(np.maximum(np.square(std) - noise**2, 0.0))
   stats = parent.problem.stats
-  if parent.config.train.get("fold_noise", False):
-    noise = parent.problem.noise_std
-    shrink = lambda std: np.sqrt(np.maximum(np.square(std) - noise**2, 0.0))
-    stats = stats._replace(vel_std=shrink(stats.vel_std),
-                           acc_std=shrink(stats.acc_std))
+  stats = stats._replace(vel_std=shrink(stats.vel_std),
+                         acc_std=shrink(stats.acc_std))
   return dataclasses.replace(parent.problem,
                              noise_std=noise_std_of(config.train, stats))
 
@@ -168,7 +177,8 @@ def load_problem(data_dir: str, config) -> Problem:
     stats = features.fold_noise(stats, noise_std)
   radius = float(config.model.connectivity_radius or
                  header["connectivity_radius"])
-  return _problem(config, stats, header["bounds"], radius, noise_std)
+  return _problem(config, stats, header["bounds"], radius, noise_std,
+                  noise_std if config.train.fold_noise else 0.0)
 
 
 class Run(NamedTuple):

@@ -286,6 +286,17 @@ class TrainTest(fixtures.TinyRunTestCase):
                            1.0, places=5)
     self.assertAlmostEqual(got.problem.noise_std / want.problem.noise_std,
                            0.4, places=5)
+    # A fine-tuning of the fine-tuning unfolds the noise folded into the
+    # statistics (0.25's), not its parent's training noise (0.1's).
+    again = fixtures.tiny_config(num_steps=1, init_from=tuned, lr_init=0.0,
+                                 lr_min=0.0, noise_velocity_fraction=0.2,
+                                 fold_noise=True)
+    again.checkpoint.every_steps = 1
+    twice = os.path.join(self.dir, "twice")
+    train.train_and_evaluate(again, self.data, twice)
+    self.assertAlmostEqual(
+        run_lib.load_run(twice).problem.noise_std
+        / run_lib.load_problem(self.data, again).noise_std, 1.0, places=5)
 
   def test_checkpoints_before_smooth_cutoff_resume(self):
     # A run whose stored config predates the setting resumes (as 0, off).
