@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from mpm import geometry
 
@@ -46,6 +47,13 @@ def fold_noise(stats: Stats, noise_std: float) -> Stats:
   grow = lambda std: (std**2 + noise_std**2)**0.5
   return stats._replace(vel_std=grow(stats.vel_std),
                         acc_std=grow(stats.acc_std))
+
+
+def unfold_noise(stats: Stats, noise_std: float) -> Stats:
+  """The inverse of ``fold_noise``: sqrt(max(std^2 - noise^2, 0))."""
+  shrink = lambda std: np.sqrt(np.maximum(np.square(std) - noise_std**2, 0.0))
+  return stats._replace(vel_std=shrink(stats.vel_std),
+                        acc_std=shrink(stats.acc_std))
 
 
 def solid_features(position: jax.Array, solids: geometry.SDFGrid,

@@ -156,11 +156,8 @@ def fine_tuning_problem(parent: "Run", config) -> Problem:
   statistics (its weights are fit to them) and the config's training noise,
   ``noise_velocity_fraction`` taken of the data's velocity std (the parent's
   own noise unfolded from it), or ``noise_std``."""
-  noise = parent.problem.folded_noise_std
-  shrink = lambda std: np.sqrt(np.maximum(np.square(std) - noise**2, 0.0))
-  stats = parent.problem.stats
-  stats = stats._replace(vel_std=shrink(stats.vel_std),
-                         acc_std=shrink(stats.acc_std))
+  stats = features.unfold_noise(parent.problem.stats,
+                                parent.problem.folded_noise_std)
   return dataclasses.replace(parent.problem,
                              noise_std=noise_std_of(config.train, stats))
 

@@ -43,8 +43,7 @@ def main(model_dir: str, out: str, indices: list[int]):
     true, pred = t.positions[frames], np.asarray(out_i.positions)
     times = frames * t.scene.frame_dt
     front_true, front_pred = metrics.runout(true), metrics.runout(pred)
-    speed = lambda x: float(np.mean(np.linalg.norm(
-        np.diff(x[-6:], axis=0), axis=-1)) / (k * t.scene.frame_dt))
+    speed = lambda x: metrics.final_speed(x, times)
     shapes = "+".join(o.shape for o in t.scene.obstacles) or "none"
     print(f"test {i} ({shapes}): front MPM {front_true[-1]:.3f} m, "
           f"learned {front_pred[-1]:.3f} m; end speed MPM "

@@ -267,18 +267,18 @@ class TrainTest(fixtures.TinyRunTestCase):
   def test_fine_tuning_takes_its_noise_from_the_config(self):
     # The parent's statistics (noise folded in), the config's noise: the
     # same noise a run from scratch with that config would draw.
-    base = os.path.join(self.dir, "base")
-    config = fixtures.tiny_config(num_steps=1, noise_velocity_fraction=0.25,
-                                  fold_noise=True)
-    config.checkpoint.every_steps = 1
-    train.train_and_evaluate(config, self.data, base)
-    fine = fixtures.tiny_config(num_steps=1, init_from=base, lr_init=0.0,
-                                lr_min=0.0, noise_velocity_fraction=0.1,
-                                fold_noise=True)
-    fine.checkpoint.every_steps = 1
-    tuned = os.path.join(self.dir, "tuned")
-    train.train_and_evaluate(fine, self.data, tuned)
-    got, want = run_lib.load_run(tuned), run_lib.load_run(base)
+    def run_at(fraction, name, init_from=""):
+      config = fixtures.tiny_config(num_steps=1, init_from=init_from,
+                                    lr_init=0.0, lr_min=0.0,
+                                    noise_velocity_fraction=fraction,
+                                    fold_noise=True)
+      config.checkpoint.every_steps = 1
+      workdir = os.path.join(self.dir, name)
+      train.train_and_evaluate(config, self.data, workdir)
+      return run_lib.load_run(workdir), config
+
+    want, _ = run_at(0.25, "base")
+    got, fine = run_at(0.1, "tuned", os.path.join(self.dir, "base"))
     for a, b in zip(got.problem.stats, want.problem.stats):
       np.testing.assert_array_equal(a, b)
     from_scratch = run_lib.load_problem(self.data, fine)
@@ -288,14 +288,9 @@ class TrainTest(fixtures.TinyRunTestCase):
                            0.4, places=5)
     # A fine-tuning of the fine-tuning unfolds the noise folded into the
     # statistics (0.25's), not its parent's training noise (0.1's).
-    again = fixtures.tiny_config(num_steps=1, init_from=tuned, lr_init=0.0,
-                                 lr_min=0.0, noise_velocity_fraction=0.2,
-                                 fold_noise=True)
-    again.checkpoint.every_steps = 1
-    twice = os.path.join(self.dir, "twice")
-    train.train_and_evaluate(again, self.data, twice)
+    twice, again = run_at(0.2, "twice", os.path.join(self.dir, "tuned"))
     self.assertAlmostEqual(
-        run_lib.load_run(twice).problem.noise_std
+        twice.problem.noise_std
         / run_lib.load_problem(self.data, again).noise_std, 1.0, places=5)
 
   def test_checkpoints_before_smooth_cutoff_resume(self):
