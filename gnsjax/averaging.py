@@ -54,7 +54,8 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
                      ) -> None:
   """InputError unless every run has the first one's model settings, data
   and training physics, and normalisation statistics (parameters of other
-  shapes or meanings cannot be averaged)."""
+  shapes or meanings cannot be averaged). Their training noise may differ:
+  the average keeps the last run's, as it keeps its optimiser."""
   first = runs[0]
   model = run_lib.model_config_dict(first.config.model)
   for run, name in zip(runs[1:], names[1:]):
@@ -68,10 +69,19 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
                                                    run.config.to_dict()):
       raise InputError(f"{name}: {where} is {b!r}, {names[0]} has {a!r}; "
                        "only runs of one problem can be averaged")
-    if run.problem.to_dict() != first.problem.to_dict():
+    if _inference_problem(run) != _inference_problem(first):
       raise InputError(f"{name}: its normalisation statistics differ from "
-                       f"{names[0]}'s (trained on other data?); only runs "
-                       "of one problem can be averaged")
+                       f"{names[0]}'s (other data, or another noise folded "
+                       "in?); only runs of one problem can be averaged")
+
+
+def _inference_problem(run: run_lib.Run) -> dict:
+  # The training noise plays no part in a rollout (fine-tunings of one
+  # parent at other noise levels average); the noise folded into the
+  # statistics does, and stays.
+  problem = run.problem.to_dict()
+  del problem["noise_std"]
+  return problem
 
 
 def average_params(params: Sequence[Any], weights: Sequence[float]) -> Any:

@@ -98,6 +98,30 @@ class WriteAverageTest(fixtures.TinyRunTestCase):
       averaging.write_average([f"{run}@7", run], [0.5, 0.5],
                               os.path.join(self.dir, "bad"))
 
+  def test_fine_tunings_at_other_noise_average(self):
+    # A fine-tuning keeps its parent's statistics and draws its own noise:
+    # it averages with the parent and the soup keeps the last run's noise.
+    # A run from scratch at that noise folds it into other statistics and
+    # is refused.
+    def run(name, **train_settings):
+      config = fixtures.tiny_config(num_steps=2, lr_init=1e-2,
+                                    noise_velocity_fraction=0.4,
+                                    fold_noise=True, **train_settings)
+      config.checkpoint.every_steps = 2
+      train.train_and_evaluate(config, self.data,
+                               os.path.join(self.dir, name))
+      return os.path.join(self.dir, name)
+
+    noisier = run("noisier", init_from=self.base)
+    base, tuned = run_lib.load_run(self.base), run_lib.load_run(noisier)
+    self.assertNotAlmostEqual(tuned.problem.noise_std, base.problem.noise_std)
+    got = averaging.write_average([self.base, noisier], [0.5, 0.5],
+                                  os.path.join(self.dir, "soup"))
+    self.assertEqual(got.problem.to_dict(), tuned.problem.to_dict())
+    with self.assertRaisesRegex(mpm.InputError, "statistics differ"):
+      averaging.write_average([self.base, run("scratch")], [0.5, 0.5],
+                              os.path.join(self.dir, "bad"))
+
   def test_runs_that_do_not_fit_together_are_refused(self):
     other = os.path.join(self.dir, "other")
     config = fixtures.tiny_config(num_steps=1)
