@@ -25,8 +25,9 @@ def main(argv):
   summary = evaluation.run(settings, _OUT.value)
   everything = summary["groups"][0]
   print(f"test MSE {summary['test_mse']:.3e} m^2 (constant velocity "
-        f"{summary['test_mse_constant_velocity']:.3e}); median front error "
-        f"{everything['median_front_error_relative']:.1%}; sand inside "
+        f"{summary['test_mse_constant_velocity']:.3e}); front error "
+        f"{everything['median_front_error_relative']:.1%} median, "
+        f"{everything['max_front_error_relative']:.0%} worst; sand inside "
         f"solids at most {everything['max_inside_solids']:.1%} "
         f"(without the constraint "
         f"{everything.get('free_max_inside_solids', float('nan')):.1%}); "

@@ -20,6 +20,7 @@ from gnsjax import rollout
 from gnsjax import run as run_lib
 from gnsjax import train
 from mpm import io as mpm_io
+from mpm import scene as scene_lib
 from tests.gnsjax import fixtures
 
 SCENE = mpm.Scene.from_dict({
@@ -145,6 +146,8 @@ class ScoreTest(absltest.TestCase):
     self.assertAlmostEqual(every["mean_mse"], 3.0)
     self.assertAlmostEqual(every["mean_mse_constant_velocity"], 4.0)
     self.assertAlmostEqual(every["median_front_error_relative"], 0.3)
+    self.assertAlmostEqual(every["max_front_error_relative"], 0.5)
+    self.assertAlmostEqual(a["max_front_error_relative"], 0.3)
     self.assertAlmostEqual(every["max_inside_solids"], 0.2)
     self.assertAlmostEqual(every["max_outside_domain"], 0.3)
     self.assertAlmostEqual(every["max_pushed_depth"], 5e-3)
@@ -157,6 +160,7 @@ class ScoreTest(absltest.TestCase):
     self.assertAlmostEqual(a["mean_pushed_fraction"], 0.2)
     self.assertNotIn("free_max_inside_solids", every)
     self.assertNotIn(evaluation.HELD_OUT, groups)
+    self.assertNotIn(evaluation.UNSEEN_SHAPE, groups)
 
   def test_held_out_group_leaves_out_seen_scenes(self):
     base = {"mean_mse_constant_velocity": 1.0, "front_error_relative": 0.1,
@@ -172,6 +176,37 @@ class ScoreTest(absltest.TestCase):
     self.assertEqual(held["trajectories"], 2)
     self.assertAlmostEqual(held["mean_mse"], 4.0)
     self.assertEqual(groups["all"]["trajectories"], 3)
+
+
+  def test_unseen_shape_groups_split_by_the_shapes_training_draws(self):
+    sizes = {"semicircle": dict(radius=0.04),
+             "rectangle": dict(width=0.04, height=0.04),
+             "triangle": dict(base=0.04, height=0.05)}
+    scene = lambda *shapes: mpm.Scene(name="test/00000/two", obstacles=tuple(
+        scene_lib.Obstacle(shape=s, x=0.8 + 0.2 * i, **sizes[s])
+        for i, s in enumerate(shapes)))
+    self.assertFalse(evaluation.describe(scene("semicircle", "rectangle"))[
+        "unseen_shape"])
+    self.assertTrue(evaluation.describe(scene("rectangle", "triangle"))[
+        "unseen_shape"])
+    base = {"group": "two", "mean_mse_constant_velocity": 1.0,
+            "deposit_error": 0.01, "max_inside_solids": 0.0,
+            "max_outside_domain": 0.0, "mean_pushed_fraction": 0.0,
+            "max_pushed_depth": 0.0, "final_speed": 0.0,
+            "mpm_final_speed": 0.0}
+    rows = [{**base, "mean_mse": 1.0, "front_error_relative": 0.1,
+             "unseen_shape": False},
+            {**base, "mean_mse": 2.0, "front_error_relative": 0.6,
+             "unseen_shape": True},
+            {**base, "mean_mse": 4.0, "front_error_relative": 0.2,
+             "unseen_shape": True}]
+    groups = {g["group"]: g for g in evaluation.group_summary(rows)}
+    unseen, seen = groups[evaluation.UNSEEN_SHAPE], groups[
+        evaluation.SEEN_SHAPES]
+    self.assertEqual((unseen["trajectories"], seen["trajectories"]), (2, 1))
+    self.assertAlmostEqual(unseen["mean_mse"], 3.0)
+    self.assertAlmostEqual(unseen["max_front_error_relative"], 0.6)
+    self.assertAlmostEqual(seen["max_front_error_relative"], 0.1)
 
 
 class RolloutSplitTest(absltest.TestCase):
