@@ -177,7 +177,6 @@ class ScoreTest(absltest.TestCase):
     self.assertAlmostEqual(held["mean_mse"], 4.0)
     self.assertEqual(groups["all"]["trajectories"], 3)
 
-
   def test_unseen_shape_groups_split_by_the_shapes_training_draws(self):
     sizes = {"semicircle": dict(radius=0.04),
              "rectangle": dict(width=0.04, height=0.04),
