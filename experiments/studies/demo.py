@@ -52,8 +52,11 @@ class Settings(settings.Base):
                                   lower=1)
   num_frames: int = settings.field(600, "Frames per scene.",
                                    lower=MIN_FRAMES)
-  pretrained: bool = settings.field(True,
-                                    "Start from the shipped small model.")
+  pretrained: bool = settings.field(
+      True, "Start from a trained model (--model); no: train from scratch.")
+  model: str = settings.field(
+      "", "Trained model to start from: a run or averaged-run directory "
+      "(default: the shipped small model).")
   workers: int = settings.field(2, "Processes simulating the dataset.",
                                 lower=1)
 
@@ -102,31 +105,52 @@ def demo_config(num_train: int, num_test: int, steps: int,
   return config
 
 
-def ship_checkpoint(source: str, workdir: str) -> int:
-  """Copies a shipped checkpoint into ``workdir``; returns its step.
+def _identity(source: str, step: int) -> dict[str, Any]:
+  """What tells a model's checkpoint from another's: its step and the hash
+  of its ``provenance.json`` (a shipped model) or, without one, its
+  directory and the hash of the config its checkpoint holds (a run or an
+  averaged run)."""
+  provenance = os.path.join(source, "provenance.json")
+  if os.path.exists(provenance):
+    with open(provenance, "rb") as f:
+      return {"step": step,
+              "provenance_sha256": hashlib.sha256(f.read()).hexdigest()}
+  config = run_lib.load_config(source, step).to_json(sort_keys=True)
+  return {"step": step, "source": os.path.abspath(source),
+          "config_sha256": hashlib.sha256(config.encode()).hexdigest()}
 
-  A work directory started from another shipped checkpoint (an older model,
-  before an update) would resume its own run and silently show the old
-  model, so it is refused.
+
+def ship_checkpoint(source: str, workdir: str) -> int:
+  """Copies the last checkpoint of a trained model (the shipped one, a run
+  or an averaged run) into ``workdir``; returns its step.
+
+  A work directory started from another checkpoint (an older model, before
+  an update) would resume its own run and silently show the old model, so
+  it is refused.
 
   Raises:
-    settings.InputError: when ``workdir`` holds checkpoints not started from
-      this one (it names what to delete).
+    settings.InputError: when ``source`` holds no checkpoint, or
+      ``workdir`` holds checkpoints not started from this one (it names what
+      to delete).
   """
-  steps = sorted(int(d) for d in os.listdir(os.path.join(source, "checkpoints"))
+  held_by_source = os.path.join(source, "checkpoints")
+  steps = sorted(int(d) for d in (os.listdir(held_by_source)
+                                  if os.path.isdir(held_by_source) else ())
                  if d.isdigit())
-  with open(os.path.join(source, "provenance.json"), "rb") as f:
-    shipped = {"step": steps[-1],
-               "provenance_sha256": hashlib.sha256(f.read()).hexdigest()}
+  if not steps:
+    raise settings.InputError(
+        f"--model={source}: no trained model there; allowed: a run or "
+        "averaged-run directory with checkpoints/<step>")
+  shipped = _identity(source, steps[-1])
   record = os.path.join(workdir, SHIPPED_RECORD)
   held = os.path.join(workdir, "checkpoints")
   if os.path.isdir(held) and os.listdir(held):
     previous = mpm_io.read_json(record) if os.path.exists(record) else None
     if previous != shipped:
       raise settings.InputError(
-          f"{workdir} holds a run started from another shipped model (or "
-          f"from none); delete {workdir} (or choose another --out) to start "
-          "from the current one")
+          f"{workdir} holds a run started from another model (or from "
+          f"none); delete {workdir} (or choose another --out) to start "
+          f"from {source}")
   # The record first: a kill between the two leaves a record and no
   # checkpoint, which the next run accepts.
   os.makedirs(workdir, exist_ok=True)
@@ -157,10 +181,13 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   workdir = os.path.join(out_dir, "run")
   os.makedirs(workdir, exist_ok=True)
   start, recipe = 0, None
-  if s.pretrained and os.path.isdir(os.path.join(settings.PRETRAINED,
-                                                 "checkpoints")):
-    start = ship_checkpoint(settings.PRETRAINED, workdir)
-    recipe = run_lib.load_config(settings.PRETRAINED).train.to_dict()
+  model = s.model or settings.PRETRAINED
+  # The shipped model may be missing (a checkout without it): the demo then
+  # trains from scratch. A model named by --model must be there.
+  if s.pretrained and (s.model or os.path.isdir(
+      os.path.join(model, "checkpoints"))):
+    start = ship_checkpoint(model, workdir)
+    recipe = run_lib.load_config(model).train.to_dict()
   config = demo_config(s.num_train, _NUM_TEST, start + s.finetune_steps,
                        s.num_frames, recipe)
   spec = dataset.DatasetSpec(**config.dataset.to_dict())
@@ -185,6 +212,7 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
       **scores})
   metrics = {
       "scene": t.scene.name, "model_step": trained.step,
+      "started_from": model if start else "scratch",
       "fine_tuned_from": start,
       "particles": int(t.positions.shape[1]), "learned_steps": len(frames),
       "frame_stride": k,

@@ -67,10 +67,33 @@ class PretrainedTest(absltest.TestCase):
     self.assertEqual(run_lib.load_run(workdir).step, step)
     with open(os.path.join(source, "provenance.json"), "a") as f:
       f.write("\n")  # another shipped model
-    with self.assertRaisesRegex(mpm.InputError, "another shipped model"):
+    with self.assertRaisesRegex(mpm.InputError, "another model"):
       demo.ship_checkpoint(source, workdir)
     fresh = os.path.join(tmp, "fresh")
     self.assertEqual(demo.ship_checkpoint(source, fresh), step)
+
+  def test_demo_starts_from_a_run_named_by_model(self):
+    # --model: a run or an averaged run, which has no provenance.json; the
+    # run is told from another by its directory and config.
+    tmp_dir = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp_dir.cleanup)
+    tmp = tmp_dir.name
+    run_dir = os.path.join(tmp, "run_a")
+    shutil.copytree(settings.PRETRAINED, run_dir)
+    os.remove(os.path.join(run_dir, "provenance.json"))
+    workdir = os.path.join(tmp, "demo_run")
+    step = demo.ship_checkpoint(run_dir, workdir)
+    self.assertEqual(demo.ship_checkpoint(run_dir, workdir), step)
+    self.assertEqual(run_lib.load_run(workdir).step, step)
+    other = os.path.join(tmp, "run_b")
+    shutil.copytree(run_dir, other)
+    with self.assertRaisesRegex(mpm.InputError, "another model.*run_b"):
+      demo.ship_checkpoint(other, workdir)
+    empty = os.path.join(tmp, "empty")
+    os.makedirs(empty)
+    with self.assertRaisesRegex(
+        mpm.InputError, f"^--model={empty}: no trained model there"):
+      demo.ship_checkpoint(empty, os.path.join(tmp, "demo_empty"))
 
 
 
