@@ -53,14 +53,18 @@ class PretrainedTest(absltest.TestCase):
     self.assertGreater(config.train.pushforward_steps, 0)
     self.assertEqual(plain.train.pushforward_steps, 0)
 
+  def _copy_of_shipped(self, name):
+    """(a temporary directory, a copy of the shipped model in it)."""
+    tmp_dir = tempfile.TemporaryDirectory()
+    self.addCleanup(tmp_dir.cleanup)
+    copy = os.path.join(tmp_dir.name, name)
+    shutil.copytree(settings.PRETRAINED, copy)
+    return tmp_dir.name, copy
+
   def test_demo_refuses_a_run_of_another_shipped_model(self):
     # After the shipped model changes, a demo's old work directory would
     # resume its own run and show the old model: refused, naming it.
-    tmp_dir = tempfile.TemporaryDirectory()
-    self.addCleanup(tmp_dir.cleanup)
-    tmp = tmp_dir.name
-    source = os.path.join(tmp, "shipped")
-    shutil.copytree(settings.PRETRAINED, source)
+    tmp, source = self._copy_of_shipped("shipped")
     workdir = os.path.join(tmp, "run")
     step = demo.ship_checkpoint(source, workdir)
     self.assertEqual(demo.ship_checkpoint(source, workdir), step)  # resumes
@@ -75,11 +79,7 @@ class PretrainedTest(absltest.TestCase):
   def test_demo_starts_from_a_run_named_by_model(self):
     # --model: a run or an averaged run, which has no provenance.json; the
     # run is told from another by its directory and config.
-    tmp_dir = tempfile.TemporaryDirectory()
-    self.addCleanup(tmp_dir.cleanup)
-    tmp = tmp_dir.name
-    run_dir = os.path.join(tmp, "run_a")
-    shutil.copytree(settings.PRETRAINED, run_dir)
+    tmp, run_dir = self._copy_of_shipped("run_a")
     os.remove(os.path.join(run_dir, "provenance.json"))
     workdir = os.path.join(tmp, "demo_run")
     step = demo.ship_checkpoint(run_dir, workdir)
