@@ -264,15 +264,15 @@ def _row(case: Case, scene: mpm.Scene | None, check: Check | None,
 
 
 # The learned rows' comparison with the MPM on the same scene and frames.
-AGAINST_MPM = ("mpm_final_speed_m_s", "mpm_rest_time_s", "travel_ratio",
-               "centre_travel_ratio")
+AGAINST_MPM = ("mpm_final_speed_m_s", "mpm_rest_time_s", "mpm_creep_mm_s",
+               "travel_ratio", "centre_travel_ratio")
 
 
 def against_mpm(learned: np.ndarray, mpm_positions: np.ndarray,
                 start: np.ndarray, frames: np.ndarray,
                 scene: mpm.Scene) -> dict:
-  """The MPM's speed at the end and rest time on the same stored frames,
-  and the learned front's travel from ``start`` [N, 2] over the MPM's, and
+  """The MPM's speed at the end, rest time and creep after it on the same
+  stored frames, and the learned front's travel from ``start`` [N, 2] over the MPM's, and
   that of the sand's centre (mean x): a thin sheet can carry the front as
   far as the MPM's while the bulk stays behind.
 
@@ -287,6 +287,7 @@ def against_mpm(learned: np.ndarray, mpm_positions: np.ndarray,
             for x in (learned, mpm_positions)]
   return {"mpm_final_speed_m_s": round(check.final_speed, 4),
           "mpm_rest_time_s": round(check.rest_time, 3),
+          "mpm_creep_mm_s": round(1e3 * check.creep, 3),
           "travel_ratio": ratio(*travel),
           "centre_travel_ratio": ratio(*centre)}
 
@@ -373,9 +374,9 @@ def report(summary: dict[str, Any]) -> str:
            "bad frame: what | max inside solids | max outside | max speed "
            "(m/s) | mean speed at the end (m/s) | at rest from (s) | creep "
            "after (mm/s) | wall (s) | MPM: speed at the end (m/s) | MPM: "
-           "at rest from (s) | front travel / MPM's | centre travel / "
-           "MPM's |",
-           "|---" * 17 + "|"]
+           "at rest from (s) | MPM: creep after (mm/s) | front travel / "
+           "MPM's | centre travel / MPM's |",
+           "|---" * 18 + "|"]
   for r in summary["rows"]:
     bad = (f"{r['break_frame']}: {r['what']}" if r["break_frame"] != "" else
            r["what"])
@@ -390,6 +391,7 @@ def report(summary: dict[str, Any]) -> str:
                  f"{r.get('creep_mm_s', '')} | {r['wall_time_s']} | "
                  f"{r.get('mpm_final_speed_m_s', '')} | "
                  f"{r.get('mpm_rest_time_s', '')} | "
+                 f"{r.get('mpm_creep_mm_s', '')} | "
                  f"{r.get('travel_ratio', '')} | "
                  f"{r.get('centre_travel_ratio', '')} |")
   return "\n".join(lines) + "\n"

@@ -124,6 +124,7 @@ class CasesTest(absltest.TestCase):
     row = stability.against_mpm(learned, mpm_run, start, frames, SCENE)
     self.assertEqual(row["mpm_final_speed_m_s"], 0.0)
     self.assertEqual(row["mpm_rest_time_s"], round(SCENE.frame_dt, 3))
+    self.assertEqual(row["mpm_creep_mm_s"], 0.0)   # at rest: no drift
     self.assertAlmostEqual(row["travel_ratio"], 0.104 / 0.2, places=3)
     self.assertAlmostEqual(row["centre_travel_ratio"], 0.104 / 0.2,
                            places=3)
