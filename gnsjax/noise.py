@@ -33,16 +33,21 @@ def random_walk(key: jax.Array, shape: tuple[int, int, int],
 # A window's sand rests below this mean speed (m per stored frame): 0.1 mm,
 # about 4 cm/s; 38% of the small dataset's windows (docs/gns.md).
 RESTING_SPEED = 1e-4
+# ... and is still below this one: 2 um, 0.8 mm/s, where the MPM's deposits
+# end (0.3 cm/s median over their last frames), so that its frame stands
+# for the truth many learned steps later (train.rest_pushforward_steps).
+STILL_SPEED = 2e-6
 
 
-def resting(inputs: jax.Array, moving: jax.Array, stride: int) -> jax.Array:
+def resting(inputs: jax.Array, moving: jax.Array, stride: int,
+            below: float = RESTING_SPEED) -> jax.Array:
   """bool [B]: whether each window's sand rests, its mean speed over the
   input frames [B, C, N, 2] (``stride`` stored frames apart) below
-  ``RESTING_SPEED``; ``moving`` [B, N] marks the sand."""
+  ``below`` (m per stored frame); ``moving`` [B, N] marks the sand."""
   step = jnp.linalg.norm(jnp.diff(inputs, axis=1), axis=-1)    # [B, C-1, N]
   per_node = jnp.mean(step, axis=1) * moving
   speed = jnp.sum(per_node, -1) / jnp.maximum(jnp.sum(moving, -1), 1)
-  return speed / stride < RESTING_SPEED
+  return speed / stride < below
 
 
 def clean_windows(key: jax.Array, positions: jax.Array, moving: jax.Array,

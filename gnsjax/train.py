@@ -260,8 +260,9 @@ class Trainer:
     return jax.tree.map(lambda x: np.asarray(x.addressable_data(0)), params)
 
   def batch_arrays(self, batch: batching.Batch, key: jax.Array,
-                   noise: bool = True, params=None,
-                   pushforward: int = 0) -> tuple[simulator.Graph, jax.Array]:
+                   noise: bool = True, params=None, pushforward: int = 0,
+                   rest_pushforward: int = 0
+                   ) -> tuple[simulator.Graph, jax.Array]:
     """(graphs with a leading batch axis, targets [B, N, 2]) on the devices.
 
     The batch holds C + P + 1 frames per window (P = ``pushforward_steps``
@@ -273,6 +274,14 @@ class Trainer:
     are then the inputs, and the true frame P steps later, moved by the
     start's noise, the target, so the model learns to correct the errors it
     makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
+
+    With ``rest_pushforward`` = R (and ``pushforward`` 0), the windows whose
+    sand is still (``noise.STILL_SPEED`` over all their frames) get as
+    inputs the model's own frames R steps on from their last C, and keep
+    their one-step target: the sand rests, so the true frame R steps on
+    is the last one, and the model learns to stop the drift (settling,
+    creep) its own rollouts add to a deposit over many steps. The other
+    windows are as without the option.
     """
     put = self.put
     c = self.problem.input_frames
@@ -292,6 +301,13 @@ class Trainer:
                                   pushforward)
       target = self._shift_target(positions[:, c + pushforward], offset,
                                   moving, solids)
+    elif rest_pushforward:
+      still = noise_lib.resting(positions, moving,
+                                self.config.train.frame_stride,
+                                below=noise_lib.STILL_SPEED)
+      pushed = self._push_forward(params, inputs, types, moving, solids,
+                                  rest_pushforward)
+      inputs = jnp.where(still[:, None, None, None], pushed, inputs)
     senders, receivers = self.graph_edges(inputs[:, -1])
     graphs = simulator.Graph(inputs, types, moving, put(senders),
                              put(receivers), solids)
@@ -531,9 +547,16 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
       # the same steps.
       push = pushforward if pushforward and np.random.default_rng(
           [tcfg.seed, step, 1]).random() < tcfg.pushforward_probability else 0
+      rest = 0
+      if (not push and tcfg.rest_pushforward_steps and
+          np.random.default_rng([tcfg.seed, step, 2]).random() <
+          tcfg.rest_pushforward_probability and
+          distributed.agree_any(np.any(_still(batch, tcfg.frame_stride)))):
+        rest = tcfg.rest_pushforward_steps
       key = jax.random.fold_in(state.key, step)
       graphs, target = trainer.batch_arrays(batch, key, params=state.params,
-                                            pushforward=push)
+                                            pushforward=push,
+                                            rest_pushforward=rest)
       weights = None if push else trainer.window_weights(batch, key)
       state, step_metrics = trainer.train_step(state, graphs, target, weights)
       done = step + 1
@@ -588,6 +611,13 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   dataset.close()
   mngr.close()
   return metrics
+
+
+def _still(batch: batching.Batch, stride: int) -> np.ndarray:
+  """bool [B]: the windows of ``batch`` whose sand is still over all their
+  frames (``noise.STILL_SPEED``), on the host."""
+  return np.asarray(noise_lib.resting(batch.positions, batch.moving, stride,
+                                      below=noise_lib.STILL_SPEED))
 
 
 def _from_process_0(value: float) -> float:

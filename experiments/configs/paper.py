@@ -61,6 +61,12 @@ def get_config() -> ml_collections.ConfigDict:
   # The pushforward steps use the solid constraint, as a rollout does; off,
   # the model sees (and learns to leave) its own steps into a solid.
   config.train.pushforward_constrained = True
+  # Rest pushforward: with this probability per batch that does not push
+  # forward, the windows whose sand is still (noise.STILL_SPEED) are rolled
+  # this many steps on by the model and keep their one-step target, so the
+  # model learns to stop its own deposit's slow drift (docs/gns.md).
+  config.train.rest_pushforward_steps = 0
+  config.train.rest_pushforward_probability = 0.0
   # Noisy targets pushed out of the solids (simulator.add_noise): the model
   # learns to step out of a solid instead of staying inside.
   config.train.target_outside_solids = False

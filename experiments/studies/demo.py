@@ -80,7 +80,8 @@ RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
                "motion_weighting", "target_outside_solids", "clean_fraction",
                "clean_resting_only", "clean_weight", "clean_scale_min",
                "pushforward_steps", "pushforward_probability",
-               "pushforward_constrained")
+               "pushforward_constrained", "rest_pushforward_steps",
+               "rest_pushforward_probability")
 
 
 def demo_config(num_train: int, num_test: int, steps: int,

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from unittest import mock
 
 from absl.testing import absltest
 import jax
@@ -353,6 +354,9 @@ class ProblemTest(absltest.TestCase):
         ("frame_stride", 0, "frame_stride = 0"),
         ("pushforward_steps", -1, "pushforward_steps = -1"),
         ("pushforward_probability", 1.5, "pushforward_probability = 1.5"),
+        ("rest_pushforward_steps", -2, "rest_pushforward_steps = -2"),
+        ("rest_pushforward_probability", -0.1,
+         "rest_pushforward_probability = -0.1"),
         ("motion_weighting", 2.0, "motion_weighting = 2.0")]:
       with self.assertRaisesRegex(ValueError, message):
         config_lib.check_config(fixtures.tiny_config(**{key: value}))
@@ -605,6 +609,63 @@ class CleanFractionTest(fixtures.TinyRunTestCase):
               (noisy[0][b], noisy[1][b]))
       np.testing.assert_array_equal(out[0][b], want[0])
       np.testing.assert_array_equal(out[1][b], want[1])
+
+
+class RestPushforwardTest(fixtures.TinyRunTestCase):
+
+  R = 4
+
+  def test_still_windows_start_from_the_models_own_frames(self):
+    # Windows 2 and 5 are still: their inputs are the model's frames R
+    # steps on from their true inputs, their target the true (resting)
+    # next frame. The moving windows are as without the option.
+    trainer, batch = _trainer_and_batch(
+        self.data, rest_pushforward_steps=self.R,
+        rest_pushforward_probability=1.0)
+    params = trainer.init_state(0).params
+    plain, plain_target = trainer.batch_arrays(batch, None, noise=False)
+    graphs, target = trainer.batch_arrays(batch, None, noise=False,
+                                          params=params,
+                                          rest_pushforward=self.R)
+    inputs, plain = np.asarray(graphs.positions), np.asarray(plain.positions)
+    np.testing.assert_array_equal(target, plain_target)
+    stride = trainer.config.train.frame_stride
+    still = train._still(batch, stride)  # pylint: disable=protected-access
+    np.testing.assert_array_equal(still, np.isin(np.arange(8), (2, 5)))
+    problem = trainer.problem
+    for b in range(len(still)):
+      if not still[b]:
+        np.testing.assert_array_equal(inputs[b], plain[b])
+        continue
+      scene = rollout.SceneNodes(
+          plain[b], batch.particle_type[b], batch.moving[b],
+          geometry.SDFGrid(batch.solids[b], problem.sdf_spacing))
+      own = rollout.rollout(simulator.ModelPredictor(trainer.model), params,
+                            scene, self.R, problem.context, problem.spec)
+      np.testing.assert_allclose(inputs[b, -1], own.positions[-1],
+                                 atol=1e-6)
+      moving = batch.moving[b]
+      # An untrained model moves the still sand.
+      self.assertGreater(np.abs(inputs[b, -1][moving] -
+                                plain[b, -1][moving]).max(), 1e-6)
+
+  def test_training_pushes_only_batches_with_still_sand(self):
+    # The tiny data's sand always moves: no batch is pushed, the run is
+    # the one without the option; with every window counted still, each
+    # batch is pushed and the losses change.
+    losses = {}
+    for name, steps, bound in (("off", 0, noise.STILL_SPEED),
+                               ("moving", self.R, noise.STILL_SPEED),
+                               ("still", self.R, 1.0)):
+      config = fixtures.tiny_config(num_steps=2, rest_pushforward_steps=steps,
+                                    rest_pushforward_probability=1.0)
+      config.log_every = 1
+      workdir = os.path.join(self.dir, name)
+      with mock.patch.object(noise, "STILL_SPEED", bound):
+        train.train_and_evaluate(config, self.data, workdir)
+      losses[name] = _losses(workdir)
+    self.assertEqual(losses["moving"], losses["off"])
+    self.assertNotEqual(losses["still"][1], losses["off"][1])
 
 
 class CleanWeightTest(fixtures.TinyRunTestCase):
