@@ -398,3 +398,19 @@ def agree_max(values: Sequence[int]) -> tuple[int, ...]:
 def agree_any(flag: bool) -> bool:
   """Whether ``flag`` holds in any process."""
   return bool(agree_max((int(flag),))[0])
+
+
+def process_rows(x: jax.Array) -> np.ndarray:
+  """This process's rows of a batch-sharded global array, on the host."""
+  shards = sorted(x.addressable_shards, key=lambda s: s.index[0].start or 0)
+  return np.concatenate([np.asarray(s.data) for s in shards])
+
+
+def from_process_0(value: float) -> float:
+  """Process 0's ``value`` (a float or bool) in every process."""
+  if jax.process_count() == 1:
+    return value
+  # pylint: disable-next=g-import-not-at-top
+  from jax.experimental import multihost_utils
+  got = multihost_utils.broadcast_one_to_all(np.float32(value))
+  return type(value)(np.asarray(got).item())

@@ -50,6 +50,12 @@ def resting(inputs: jax.Array, moving: jax.Array, stride: int,
   return speed / stride < below
 
 
+def still(positions: jax.Array, moving: jax.Array, stride: int) -> jax.Array:
+  """bool [B]: the windows (frames [B, T, N, 2]) whose sand is still over
+  all their frames: mean speed below ``STILL_SPEED`` (read at each call)."""
+  return resting(positions, moving, stride, below=STILL_SPEED)
+
+
 def clean_windows(key: jax.Array, positions: jax.Array, moving: jax.Array,
                   fraction: float, resting_only: bool,
                   stride: int) -> jax.Array:

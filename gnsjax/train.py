@@ -214,7 +214,7 @@ class Trainer:
     """Senders, receivers [B, E] of the last input frame [B, N, 2] (across
     processes: of this process's rows, from and to host arrays)."""
     if self.multi:
-      positions = _process_rows(positions)
+      positions = distributed.process_rows(positions)
     n = positions.shape[1]
     spec = self.problem.spec
     nbrs = self._nbrs.get(n)
@@ -274,14 +274,9 @@ class Trainer:
     are then the inputs, and the true frame P steps later, moved by the
     start's noise, the target, so the model learns to correct the errors it
     makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
-
-    With ``rest_pushforward`` = R (and ``pushforward`` 0), the windows whose
-    sand is still (``noise.STILL_SPEED`` over all their frames) get as
-    inputs the model's own frames R steps on from their last C, and keep
-    their one-step target: the sand rests, so the true frame R steps on
-    is the last one, and the model learns to stop the drift (settling,
-    creep) its own rollouts add to a deposit over many steps. The other
-    windows are as without the option.
+    With ``rest_pushforward`` = R, still windows (``noise.still``) start
+    from the model's frames R steps on and keep their one-step target: the
+    true frame R steps on of resting sand is the last (docs/gns.md).
     """
     put = self.put
     c = self.problem.input_frames
@@ -302,12 +297,9 @@ class Trainer:
       target = self._shift_target(positions[:, c + pushforward], offset,
                                   moving, solids)
     elif rest_pushforward:
-      still = noise_lib.resting(positions, moving,
-                                self.config.train.frame_stride,
-                                below=noise_lib.STILL_SPEED)
-      pushed = self._push_forward(params, inputs, types, moving, solids,
-                                  rest_pushforward)
-      inputs = jnp.where(still[:, None, None, None], pushed, inputs)
+      still = noise_lib.still(positions, moving, self.config.train.frame_stride)
+      inputs = jnp.where(still[:, None, None, None], self._push_forward(
+          params, inputs, types, moving, solids, rest_pushforward), inputs)
     senders, receivers = self.graph_edges(inputs[:, -1])
     graphs = simulator.Graph(inputs, types, moving, put(senders),
                              put(receivers), solids)
@@ -355,12 +347,6 @@ class Trainer:
     self._pushforward_nbrs[n] = nbrs
     frames = jnp.concatenate([window[:-1], carried, positions[-1:]], 0)
     return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
-
-
-def _process_rows(x: jax.Array) -> np.ndarray:
-  """This process's rows of a batch-sharded global array, on the host."""
-  shards = sorted(x.addressable_shards, key=lambda s: s.index[0].start or 0)
-  return np.concatenate([np.asarray(s.data) for s in shards])
 
 
 @functools.partial(jax.jit, static_argnums=1)
@@ -521,7 +507,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   metrics = {}
   # The logged training time is process 0's (the others read its log).
   trained_before = _resume_csv(csv_path, start) if lead else 0.0
-  trained_before = _from_process_0(trained_before)
+  trained_before = distributed.from_process_0(trained_before)
   run_start = last_time = time.perf_counter()
   last_step = start
   rows = trainer.rows(tcfg.batch_size)
@@ -547,12 +533,11 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
       # the same steps.
       push = pushforward if pushforward and np.random.default_rng(
           [tcfg.seed, step, 1]).random() < tcfg.pushforward_probability else 0
-      rest = 0
-      if (not push and tcfg.rest_pushforward_steps and
-          np.random.default_rng([tcfg.seed, step, 2]).random() <
-          tcfg.rest_pushforward_probability and
-          distributed.agree_any(np.any(_still(batch, tcfg.frame_stride)))):
-        rest = tcfg.rest_pushforward_steps
+      rest = tcfg.rest_pushforward_steps if (
+          not push and tcfg.rest_pushforward_steps and np.random.default_rng(
+              [tcfg.seed, step, 2]).random() < tcfg.rest_pushforward_probability
+          and distributed.agree_any(np.any(noise_lib.still(
+              batch.positions, batch.moving, tcfg.frame_stride)))) else 0
       key = jax.random.fold_in(state.key, step)
       graphs, target = trainer.batch_arrays(batch, key, params=state.params,
                                             pushforward=push,
@@ -598,7 +583,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                          run_start + trained_before >= tcfg.max_wall_time_s)
       if tcfg.max_wall_time_s:
         # Clocks differ: all stop when process 0's budget is spent.
-        out_of_time = _from_process_0(out_of_time)
+        out_of_time = distributed.from_process_0(out_of_time)
       checkpoint.save(mngr, done, state, config_dict, problem.to_dict(),
                       trainer.graph_capacities(),
                       force=done == tcfg.num_steps or out_of_time)
@@ -611,20 +596,3 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   dataset.close()
   mngr.close()
   return metrics
-
-
-def _still(batch: batching.Batch, stride: int) -> np.ndarray:
-  """bool [B]: the windows of ``batch`` whose sand is still over all their
-  frames (``noise.STILL_SPEED``), on the host."""
-  return np.asarray(noise_lib.resting(batch.positions, batch.moving, stride,
-                                      below=noise_lib.STILL_SPEED))
-
-
-def _from_process_0(value: float) -> float:
-  """Process 0's ``value`` (a float or bool) in every process."""
-  if jax.process_count() == 1:
-    return value
-  # pylint: disable-next=g-import-not-at-top
-  from jax.experimental import multihost_utils
-  got = multihost_utils.broadcast_one_to_all(np.float32(value))
-  return type(value)(np.asarray(got).item())

@@ -630,7 +630,7 @@ class RestPushforwardTest(fixtures.TinyRunTestCase):
     inputs, plain = np.asarray(graphs.positions), np.asarray(plain.positions)
     np.testing.assert_array_equal(target, plain_target)
     stride = trainer.config.train.frame_stride
-    still = train._still(batch, stride)  # pylint: disable=protected-access
+    still = np.asarray(noise.still(batch.positions, batch.moving, stride))
     np.testing.assert_array_equal(still, np.isin(np.arange(8), (2, 5)))
     problem = trainer.problem
     for b in range(len(still)):
