@@ -272,9 +272,9 @@ def against_mpm(learned: np.ndarray, mpm_positions: np.ndarray,
                 start: np.ndarray, frames: np.ndarray,
                 scene: mpm.Scene) -> dict:
   """The MPM's speed at the end, rest time and creep after it on the same
-  stored frames, and the learned front's travel from ``start`` [N, 2] over the MPM's, and
-  that of the sand's centre (mean x): a thin sheet can carry the front as
-  far as the MPM's while the bulk stays behind.
+  stored frames, and the learned front's travel from ``start`` [N, 2] over
+  the MPM's, and that of the sand's centre (mean x): a thin sheet can carry
+  the front as far as the MPM's while the bulk stays behind.
 
   Args:
     learned, mpm_positions: [T, N, 2] sand (m) at stored ``frames`` [T].
