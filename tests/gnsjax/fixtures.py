@@ -1,5 +1,6 @@
 """Tiny datasets and configs shared by the gnsjax tests (cached per process)."""
 
+import csv
 import fcntl
 import functools
 import os
@@ -34,6 +35,12 @@ def tiny_dataset() -> str:
     if not os.path.exists(os.path.join(path, "metadata.json")):
       dataset.generate(SPEC, path, workers=1)
   return path
+
+
+def logged_losses(workdir: str) -> dict[int, float]:
+  """{step: loss} of a run's metrics.csv."""
+  with open(os.path.join(workdir, "metrics.csv"), newline="") as f:
+    return {int(r["step"]): float(r["loss"]) for r in csv.DictReader(f)}
 
 
 def tiny_config(**train):
