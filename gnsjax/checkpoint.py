@@ -10,6 +10,7 @@ run computes exactly what an uninterrupted one does. Saved every
 directory and renames it).
 """
 
+import csv
 import glob
 import logging as std_logging
 import os
@@ -252,3 +253,26 @@ def restore_params(mngr: ocp.CheckpointManager, abstract_params: Any,
   restored = _read(mngr, step, state=ocp.args.StandardRestore())["state"]
   return jax.tree.map(lambda like, value: jax.numpy.asarray(value, like.dtype),
                       abstract_params, restored["params"])
+
+
+# The columns of a run's metrics.csv (gnsjax.train).
+METRICS_FIELDS = ["step", "loss", "grad_norm", "learning_rate",
+                  "steps_per_s", "wall_time_s"]
+
+
+def resume_metrics_csv(path: str, step: int) -> float:
+  """Drops the rows of a run's metrics.csv logged after ``step`` (its
+  checkpoint: a killed run's rows, redone now) and returns the training
+  time [s] up to it."""
+  if not os.path.exists(path):
+    return 0.0
+  with open(path, newline="") as f:
+    rows = [r for r in csv.DictReader(f) if int(r["step"]) <= step]
+  tmp = f"{path}.tmp-{os.getpid()}"
+  with open(tmp, "w", newline="") as f:
+    writer = csv.DictWriter(f, fieldnames=METRICS_FIELDS,
+                            extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+  os.replace(tmp, path)
+  return float(rows[-1]["wall_time_s"]) if rows else 0.0

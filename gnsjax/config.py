@@ -21,12 +21,13 @@ CONFIG_KEYS = {
     "model": ("latent_size", "hidden_layers", "num_message_passing_steps",
               "type_embedding_size", "split_first_layer",
               "connectivity_radius", "boundary_particles", "sdf_spacing",
-              "smooth_cutoff"),
+              "smooth_cutoff", "velocity_gate"),
     "train": ("seed", "batch_size", "num_steps", "input_frames",
               "frame_stride", "noise_std", "noise_velocity_fraction",
               "fold_noise", "motion_weighting", "pushforward_steps",
               "pushforward_probability", "pushforward_constrained",
               "rest_pushforward_steps", "rest_pushforward_probability",
+              "rest_pushforward_speed", "rest_pushforward_stay",
               "target_outside_solids",
               "clean_fraction", "clean_resting_only", "clean_weight",
               "clean_scale_min",
@@ -89,6 +90,7 @@ RANGES = {
     ("train", "pushforward_probability"): (float, 0.0, 1.0),
     ("train", "rest_pushforward_steps"): (int, 0, None),
     ("train", "rest_pushforward_probability"): (float, 0.0, 1.0),
+    ("train", "rest_pushforward_speed"): (float, 0.0, None),
     ("train", "max_wall_time_s"): (float, 0.0, None),
     ("train", "lr_init"): (float, 0.0, None),
     ("train", "lr_min"): (float, 0.0, None),
@@ -144,13 +146,15 @@ def check_compatible(stored: dict, config) -> None:
 def check_fine_tuning(stored: dict, config) -> None:
   """Refuses to start from a checkpoint of another architecture or physics.
 
-  The model may differ in ``smooth_cutoff`` only (it adds no parameter);
-  the data and the inputs (``train.input_frames``, ``frame_stride``) must
-  be the same.
+  The model may differ in ``smooth_cutoff`` (it adds no parameter) and may
+  add a velocity gate (whose parameters start fresh); the data and the
+  inputs (``train.input_frames``, ``frame_stride``) must be the same.
   """
   old = run_lib.model_config_dict(stored.get("model", {}))
   new = run_lib.model_config_dict(config_dict(config)["model"])
   old["smooth_cutoff"] = new["smooth_cutoff"]
+  if new["velocity_gate"]:
+    old["velocity_gate"] = True
   compatible = dict(stored, model=old)
   try:
     check_compatible(compatible, config)

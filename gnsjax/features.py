@@ -115,6 +115,19 @@ def target_acceleration(positions: jax.Array, target: jax.Array,
   return (acc - stats.acc_mean[None]) / stats.acc_std[None]
 
 
+def gate_acceleration(positions: jax.Array, output: jax.Array,
+                      stats: Stats) -> jax.Array:
+  """Normalised acceleration [N, 2] of a gated model's ``output`` [N, 3]
+  (normalised acceleration a, then the gate's logit z): the acceleration
+  that makes the next velocity g (v + a), g = sigmoid(z), v the last input
+  velocity (``models.EncodeProcessDecode.velocity_gate``)."""
+  acc = output[:, :2] * stats.acc_std[None] + stats.acc_mean[None]
+  velocity = positions[-1] - positions[-2]
+  gate = jax.nn.sigmoid(output[:, 2:])
+  gated = gate * (velocity + acc) - velocity
+  return (gated - stats.acc_mean[None]) / stats.acc_std[None]
+
+
 def integrate(positions: jax.Array, normalized_acc: jax.Array,
               stats: Stats) -> jax.Array:
   """Next positions [N, 2] by semi-implicit Euler with dt = 1 learned step.

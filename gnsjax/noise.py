@@ -34,8 +34,8 @@ def random_walk(key: jax.Array, shape: tuple[int, int, int],
 # about 4 cm/s; 38% of the small dataset's windows (docs/gns.md).
 RESTING_SPEED = 1e-4
 # ... and is still below this one: 2 um, 0.8 mm/s, slow enough that its
-# last frame stands for the truth many learned steps later
-# (train.rest_pushforward_steps). No window of the 1.5 s small dataset is
+# last frame stands for the truth many learned steps later (the default
+# train.rest_pushforward_speed). No window of the 1.5 s small dataset is
 # that slow (its resting sand settles at 2-4 mm/s); 4.7% of 3 s ones are.
 STILL_SPEED = 2e-6
 
@@ -51,10 +51,11 @@ def resting(inputs: jax.Array, moving: jax.Array, stride: int,
   return speed / stride < below
 
 
-def still(positions: jax.Array, moving: jax.Array, stride: int) -> jax.Array:
+def still(positions: jax.Array, moving: jax.Array, stride: int,
+          below: float = STILL_SPEED) -> jax.Array:
   """bool [B]: the windows (frames [B, T, N, 2]) whose sand is still over
-  all their frames: mean speed below ``STILL_SPEED`` (read at each call)."""
-  return resting(positions, moving, stride, below=STILL_SPEED)
+  all their frames: mean speed below ``below`` (m per stored frame)."""
+  return resting(positions, moving, stride, below=below)
 
 
 def clean_windows(key: jax.Array, positions: jax.Array, moving: jax.Array,

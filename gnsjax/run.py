@@ -7,6 +7,7 @@ node choice); it is stored with every checkpoint (``Problem.to_dict``), so
 alone: no dataset, no optimiser.
 """
 
+from collections.abc import Mapping
 import dataclasses
 from typing import Any, NamedTuple
 
@@ -26,7 +27,7 @@ from mpm import io as mpm_io
 
 # Model settings added after models were shipped, with the value that
 # reproduces a checkpoint written before them.
-MODEL_DEFAULTS = {"smooth_cutoff": 0.0}
+MODEL_DEFAULTS = {"smooth_cutoff": 0.0, "velocity_gate": False}
 
 
 def model_config_dict(model_config) -> dict:
@@ -64,7 +65,25 @@ def create_model(model_config: ml_collections.ConfigDict
       num_message_passing_steps=model_config["num_message_passing_steps"],
       type_embedding_size=model_config["type_embedding_size"],
       split_first_layer=model_config["split_first_layer"],
-      smooth_cutoff=float(model_config["smooth_cutoff"]))
+      smooth_cutoff=float(model_config["smooth_cutoff"]),
+      velocity_gate=bool(model_config["velocity_gate"]))
+
+
+def fine_tuning_params(parent_params, fresh_params):
+  """A fine-tuning's first parameters: the parent's, and where the new model
+  has parameters the parent lacks (an added velocity gate), their fresh
+  initial values. Shared parameters must have the same shapes."""
+  if not isinstance(fresh_params, Mapping):
+    if np.shape(parent_params) != np.shape(fresh_params):
+      raise ValueError(f"parameter shapes differ: {np.shape(parent_params)} "
+                       f"vs {np.shape(fresh_params)}")
+    return parent_params
+  missing = set(parent_params) - set(fresh_params)
+  if missing:
+    raise ValueError(f"the parent has parameters the model lacks: "
+                     f"{sorted(missing)}")
+  return {k: fine_tuning_params(parent_params[k], v) if k in parent_params
+          else v for k, v in fresh_params.items()}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -49,13 +49,17 @@ class Graph(NamedTuple):
 
 def predict(model: models.EncodeProcessDecode, params, graph: Graph,
             context: Context, radius: float) -> jax.Array:
-  """Normalised accelerations [N, 2] of a window."""
+  """Normalised accelerations [N, 2] of a window (a gated model's gate
+  applied)."""
   node_f = features.node_features(graph.positions, context.stats,
                                   graph.solids, radius)
   edge_f = features.edge_features(graph.positions[-1], graph.senders,
                                   graph.receivers, radius)
-  return model.apply(params, node_f, graph.particle_type, edge_f,
-                     graph.senders, graph.receivers)
+  out = model.apply(params, node_f, graph.particle_type, edge_f,
+                    graph.senders, graph.receivers)
+  if model.velocity_gate:
+    return features.gate_acceleration(graph.positions, out, context.stats)
+  return out
 
 
 @dataclasses.dataclass(frozen=True)

@@ -274,9 +274,11 @@ class Trainer:
     are then the inputs, and the true frame P steps later, moved by the
     start's noise, the target, so the model learns to correct the errors it
     makes in its own rollouts (Brandstetter et al. 2022, LagrangeBench).
-    With ``rest_pushforward`` = R, still windows (``noise.still``) start
-    from the model's frames R steps on and keep their one-step target: the
-    true frame R steps on of resting sand is the last (docs/gns.md).
+    With ``rest_pushforward`` = R, still windows (``noise.still`` below
+    ``train.rest_pushforward_speed``) start from the model's frames R steps
+    on and keep their one-step target: the true frame R steps on of resting
+    sand is the last (docs/gns.md); with ``train.rest_pushforward_stay``
+    the target moves with the model's drift, as with noise: stop there.
     """
     put = self.put
     c = self.problem.input_frames
@@ -297,9 +299,15 @@ class Trainer:
       target = self._shift_target(positions[:, c + pushforward], offset,
                                   moving, solids)
     elif rest_pushforward:
-      still = noise_lib.still(positions, moving, self.config.train.frame_stride)
-      inputs = jnp.where(still[:, None, None, None], self._push_forward(
-          params, inputs, types, moving, solids, rest_pushforward), inputs)
+      tcfg = self.config.train
+      still = noise_lib.still(positions, moving, tcfg.frame_stride,
+                              tcfg.rest_pushforward_speed)
+      pushed = self._push_forward(params, inputs, types, moving, solids,
+                                  rest_pushforward)
+      if tcfg.rest_pushforward_stay:
+        target = jnp.where(still[:, None, None], self._shift_target(
+            target, pushed[:, -1] - inputs[:, -1], moving, solids), target)
+      inputs = jnp.where(still[:, None, None, None], pushed, inputs)
     senders, receivers = self.graph_edges(inputs[:, -1])
     graphs = simulator.Graph(inputs, types, moving, put(senders),
                              put(receivers), solids)
@@ -406,26 +414,6 @@ def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
   return metrics
 
 
-_CSV_FIELDS = ["step", "loss", "grad_norm", "learning_rate", "steps_per_s",
-               "wall_time_s"]
-
-
-def _resume_csv(path: str, step: int) -> float:
-  """Drops rows logged after ``step`` (a killed run's, redone now) and
-  returns the training time [s] up to it."""
-  if not os.path.exists(path):
-    return 0.0
-  with open(path, newline="") as f:
-    rows = [r for r in csv.DictReader(f) if int(r["step"]) <= step]
-  tmp = f"{path}.tmp-{os.getpid()}"
-  with open(tmp, "w", newline="") as f:
-    writer = csv.DictWriter(f, fieldnames=_CSV_FIELDS, extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(rows)
-  os.replace(tmp, path)
-  return float(rows[-1]["wall_time_s"]) if rows else 0.0
-
-
 def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                        workdir: str) -> dict:
   """Trains (or resumes) in ``workdir``; returns the last metrics.
@@ -465,7 +453,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   trainer = Trainer(config, problem)
   state = trainer.init_state(tcfg.seed)
   if start_from is not None:
-    state = trainer.replicate(state.replace(params=start_from.params))
+    state = trainer.replicate(state.replace(params=run_lib.fine_tuning_params(
+        start_from.params, state.params)))
     logging.info("fine-tuning from %s, step %d", tcfg.init_from,
                  start_from.step)
   elif stored is not None:
@@ -506,7 +495,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   start = int(state.step)
   metrics = {}
   # The logged training time is process 0's (the others read its log).
-  trained_before = _resume_csv(csv_path, start) if lead else 0.0
+  trained_before = (checkpoint.resume_metrics_csv(csv_path, start) if lead
+                    else 0.0)
   trained_before = distributed.from_process_0(trained_before)
   run_start = last_time = time.perf_counter()
   last_step = start
@@ -517,7 +507,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
             disable=not lead) as bar:
     out = None
     if lead:
-      out = csv.DictWriter(csv_file, fieldnames=_CSV_FIELDS,
+      out = csv.DictWriter(csv_file, fieldnames=checkpoint.METRICS_FIELDS,
                            extrasaction="ignore")
       if csv_file.tell() == 0:
         out.writeheader()
@@ -537,7 +527,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
           not push and tcfg.rest_pushforward_steps and np.random.default_rng(
               [tcfg.seed, step, 2]).random() < tcfg.rest_pushforward_probability
           and distributed.agree_any(np.any(noise_lib.still(
-              batch.positions, batch.moving, tcfg.frame_stride)))) else 0
+              batch.positions, batch.moving, tcfg.frame_stride,
+              tcfg.rest_pushforward_speed)))) else 0
       key = jax.random.fold_in(state.key, step)
       graphs, target = trainer.batch_arrays(batch, key, params=state.params,
                                             pushforward=push,

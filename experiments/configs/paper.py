@@ -28,6 +28,9 @@ def get_config() -> ml_collections.ConfigDict:
   # Messages taper to zero over this fraction of R before the cutoff, so the
   # model is a continuous function of the positions (gnsjax.models); 0: off.
   config.model.smooth_cutoff = 0.0
+  # The model also scales each step's velocity by a learned factor in
+  # (0, 1), so resting sand can stop exactly (gnsjax.models).
+  config.model.velocity_gate = False
   # None: the dataset's connectivity radius.
   config.model.connectivity_radius = ml_collections.FieldReference(
       None, field_type=float)
@@ -67,6 +70,13 @@ def get_config() -> ml_collections.ConfigDict:
   # model learns to stop its own deposit's slow drift (docs/gns.md).
   config.train.rest_pushforward_steps = 0
   config.train.rest_pushforward_probability = 0.0
+  # Still: mean speed below this over the whole window (m per stored frame;
+  # noise.STILL_SPEED, 0.8 mm/s).
+  config.train.rest_pushforward_speed = 2e-6
+  # The still windows' target moves with the model's drift, as with noise:
+  # the model learns to stop where its own steps took the sand, not to
+  # return to the truth.
+  config.train.rest_pushforward_stay = False
   # Noisy targets pushed out of the solids (simulator.add_noise): the model
   # learns to step out of a solid instead of staying inside.
   config.train.target_outside_solids = False

@@ -81,7 +81,8 @@ RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
                "clean_resting_only", "clean_weight", "clean_scale_min",
                "pushforward_steps", "pushforward_probability",
                "pushforward_constrained", "rest_pushforward_steps",
-               "rest_pushforward_probability")
+               "rest_pushforward_probability", "rest_pushforward_speed",
+               "rest_pushforward_stay")
 
 
 def demo_config(num_train: int, num_test: int, steps: int,

@@ -145,6 +145,57 @@ class SmoothCutoffTest(absltest.TestCase):
       model.init(jax.random.key(0), *_inputs(n=4, e=4))
 
 
+class VelocityGateTest(absltest.TestCase):
+  """The gate's logit as the model's last output, and what it does to a
+  step: next velocity g (v + a)."""
+
+  def setUp(self):
+    super().setUp()
+    self.stats = features.Stats(jnp.array([0.1, -0.2]), jnp.array([2.0, 4.0]),
+                                jnp.array([0.01, -0.02]),
+                                jnp.array([0.5, 0.25]))
+    rng = np.random.default_rng(1)
+    self.positions = jnp.asarray(rng.normal(size=(6, 10, 2)), jnp.float32)
+    self.acc = jnp.asarray(rng.normal(size=(10, 2)), jnp.float32)
+
+  def _next(self, logit):
+    out = jnp.concatenate([self.acc, jnp.full((10, 1), logit)], -1)
+    acc = features.gate_acceleration(self.positions, out, self.stats)
+    return features.integrate(self.positions, acc, self.stats)
+
+  def test_a_closed_gate_stops_the_sand_exactly(self):
+    np.testing.assert_allclose(self._next(-40.0), self.positions[-1],
+                               atol=1e-6)
+
+  def test_an_open_gate_is_the_plain_step(self):
+    np.testing.assert_allclose(
+        self._next(40.0), features.integrate(self.positions, self.acc,
+                                             self.stats), atol=1e-5)
+
+  def test_half_open_halves_the_velocity(self):
+    plain = features.integrate(self.positions, self.acc, self.stats)
+    last = self.positions[-1]
+    np.testing.assert_allclose(self._next(0.0) - last, (plain - last) / 2,
+                               atol=1e-5)
+
+  def test_the_gate_starts_the_same_for_every_node(self):
+    model = models.EncodeProcessDecode(
+        latent_size=16, num_message_passing_steps=2, type_embedding_size=4,
+        velocity_gate=True)
+    args = _inputs(3)
+    out = model.apply(model.init(jax.random.key(0), *args), *args)
+    self.assertEqual(out.shape, (N, 3))
+    np.testing.assert_allclose(out[:, 2], models.GATE_LOGIT_INIT, rtol=1e-6)
+    # The acceleration head is the ungated model's, parameter for
+    # parameter.
+    plain = models.EncodeProcessDecode(
+        latent_size=16, num_message_passing_steps=2, type_embedding_size=4)
+    params = model.init(jax.random.key(0), *args)
+    del params["params"]["velocity_gate"]
+    np.testing.assert_allclose(plain.apply(params, *args), out[:, :2],
+                               atol=1e-6)
+
+
 class FeaturesTest(absltest.TestCase):
 
   def setUp(self):

@@ -19,6 +19,7 @@ from gnsjax import checkpoint
 from gnsjax import config as config_lib
 from gnsjax import data
 from gnsjax import features
+from gnsjax import models
 from gnsjax import run as run_lib
 from gnsjax import simulator
 from gnsjax import train
@@ -253,6 +254,29 @@ class TrainTest(fixtures.TinyRunTestCase):
     with self.assertRaisesRegex(mpm.InputError, "init_from = .*'model'"):
       train.train_and_evaluate(other, self.data,
                                os.path.join(self.dir, "other"))
+
+  def test_fine_tuning_may_add_a_velocity_gate(self):
+    # The parent's parameters, and the gate's at their initial values; a
+    # gated parent cannot lose its gate.
+    base = os.path.join(self.dir, "base")
+    config = fixtures.tiny_config(num_steps=2)
+    config.checkpoint.every_steps = 2
+    train.train_and_evaluate(config, self.data, base)
+    gated = os.path.join(self.dir, "gated")
+    fine = fixtures.tiny_config(num_steps=1, init_from=base, lr_init=0.0,
+                                lr_min=0.0)
+    fine.model.velocity_gate = True
+    fine.checkpoint.every_steps = 1
+    train.train_and_evaluate(fine, self.data, gated)
+    got, want = run_lib.load_run(gated), run_lib.load_run(base)
+    gate = got.params["params"].pop("velocity_gate")
+    jax.tree.map(np.testing.assert_array_equal, got.params, want.params)
+    np.testing.assert_array_equal(gate["kernel"], 0)
+    np.testing.assert_allclose(gate["bias"] * models.GATE_GAIN,
+                               models.GATE_LOGIT_INIT, rtol=1e-6)
+    back = fixtures.tiny_config(num_steps=1, init_from=gated)
+    with self.assertRaisesRegex(mpm.InputError, "init_from = .*'model'"):
+      train.train_and_evaluate(back, self.data, os.path.join(self.dir, "b"))
 
   def test_fine_tuning_takes_its_noise_from_the_config(self):
     # The parent's statistics (noise folded in), the config's noise: the

@@ -4,7 +4,6 @@ clean or quiet resting windows and their weights, and the rest pushforward.
 """
 
 import os
-from unittest import mock
 
 from absl.testing import absltest
 import jax
@@ -308,6 +307,27 @@ class RestPushforwardTest(fixtures.TinyRunTestCase):
       self.assertGreater(np.abs(inputs[b, -1][moving] -
                                 plain[b, -1][moving]).max(), 1e-6)
 
+  def test_the_stay_target_moves_with_the_models_drift(self):
+    # Every window counted still: the target is the true next frame moved
+    # by how far the model's R steps took the last input frame, pushed out
+    # of the solids as a noisy target is.
+    trainer, batch = _trainer_and_batch(
+        self.data, rest_pushforward_steps=self.R,
+        rest_pushforward_probability=1.0, rest_pushforward_speed=1.0,
+        rest_pushforward_stay=True)
+    params = trainer.init_state(0).params
+    plain, plain_target = trainer.batch_arrays(batch, None, noise=False)
+    graphs, target = trainer.batch_arrays(batch, None, noise=False,
+                                          params=params,
+                                          rest_pushforward=self.R)
+    drift = graphs.positions[:, -1] - plain.positions[:, -1]
+    self.assertGreater(float(jnp.max(jnp.abs(drift))), 1e-6)
+    for b in range(len(target)):
+      solids = geometry.SDFGrid(batch.solids[b], trainer.problem.sdf_spacing)
+      want = simulator.shift_target(plain_target[b], drift[b],
+                                    batch.moving[b], solids)
+      np.testing.assert_allclose(target[b], want, atol=1e-6)
+
   def test_training_pushes_only_batches_with_still_sand(self):
     # The tiny data's sand always moves: no batch is pushed, the run is
     # the one without the option; with every window counted still, each
@@ -317,11 +337,11 @@ class RestPushforwardTest(fixtures.TinyRunTestCase):
                                ("moving", self.R, noise.STILL_SPEED),
                                ("still", self.R, 1.0)):
       config = fixtures.tiny_config(num_steps=2, rest_pushforward_steps=steps,
-                                    rest_pushforward_probability=1.0)
+                                    rest_pushforward_probability=1.0,
+                                    rest_pushforward_speed=bound)
       config.log_every = 1
       workdir = os.path.join(self.dir, name)
-      with mock.patch.object(noise, "STILL_SPEED", bound):
-        train.train_and_evaluate(config, self.data, workdir)
+      train.train_and_evaluate(config, self.data, workdir)
       losses[name] = fixtures.logged_losses(workdir)
     self.assertEqual(losses["moving"], losses["off"])
     self.assertNotEqual(losses["still"][1], losses["off"][1])
