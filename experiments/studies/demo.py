@@ -85,15 +85,24 @@ RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
                "rest_pushforward_stay")
 
 
+# The model options a shipped model may have beyond the small config's: a
+# fine-tuning of it must have the same.
+MODEL_KEYS = ("smooth_cutoff", "velocity_gate")
+
+
 def demo_config(num_train: int, num_test: int, steps: int,
-                num_frames: int = 600, recipe: dict | None = None):
+                num_frames: int = 600, recipe: dict | None = None,
+                model: dict | None = None):
   """configs/small.py with a demo-sized dataset and a short training, with
   the ``RECIPE_KEYS`` that ``recipe`` (a shipped model's ``config.train``)
+  holds, and the ``MODEL_KEYS`` that ``model`` (its ``config.model``)
   holds."""
   config = small.get_config()
-  for key in RECIPE_KEYS:
-    if recipe is not None and key in recipe:
-      config.train[key] = recipe[key]
+  for keys, section, given in ((RECIPE_KEYS, "train", recipe),
+                               (MODEL_KEYS, "model", model)):
+    for key in keys:
+      if given is not None and key in given:
+        config[section][key] = given[key]
   config.dataset.num_frames = num_frames
   config.dataset.num_train = num_train
   config.dataset.num_test = num_test
@@ -182,16 +191,17 @@ def run(s: Settings, out_dir: str) -> dict[str, Any]:
   data_dir = os.path.join(out_dir, "data")
   workdir = os.path.join(out_dir, "run")
   os.makedirs(workdir, exist_ok=True)
-  start, recipe = 0, None
+  start, recipe, shipped_model = 0, None, None
   model = s.model or settings.PRETRAINED
   # The shipped model may be missing (a checkout without it): the demo then
   # trains from scratch. A model named by --model must be there.
   if s.pretrained and (s.model or os.path.isdir(
       os.path.join(model, "checkpoints"))):
     start = ship_checkpoint(model, workdir)
-    recipe = run_lib.load_config(model).train.to_dict()
+    shipped = run_lib.load_config(model)
+    recipe, shipped_model = shipped.train.to_dict(), shipped.model.to_dict()
   config = demo_config(s.num_train, _NUM_TEST, start + s.finetune_steps,
-                       s.num_frames, recipe)
+                       s.num_frames, recipe, shipped_model)
   spec = dataset.DatasetSpec(**config.dataset.to_dict())
   with tqdm.tqdm(total=spec.num_train + spec.num_test, unit="traj",
                  desc="dataset") as bar:

@@ -14,6 +14,7 @@ import numpy as np
 import mpm
 from experiments.studies import demo
 from experiments.studies import settings
+from gnsjax import config as config_lib
 from gnsjax import run as run_lib
 from mpm import io as mpm_io
 from tests.experiments import entry_points_test
@@ -37,14 +38,18 @@ class PretrainedTest(absltest.TestCase):
                      provenance["config"]["train"]["frame_stride"])
 
   def test_the_fine_tuning_keeps_the_shipped_models_recipe(self):
-    shipped = run_lib.load_run(settings.PRETRAINED).config.train.to_dict()
-    config = demo.demo_config(4, 1, 5200, recipe=shipped)
+    stored = run_lib.load_run(settings.PRETRAINED).config
+    shipped, model = stored.train.to_dict(), stored.model.to_dict()
+    config = demo.demo_config(4, 1, 5200, recipe=shipped, model=model)
     plain = demo.demo_config(4, 1, 5200)
     for key in demo.RECIPE_KEYS:
       if key in shipped:
         self.assertEqual(config.train[key], shipped[key], key)
-    # Only the recipe: the demo's own data, length and rate stay.
-    for section in ("dataset", "model", "checkpoint", "eval"):
+    # The shipped model's architecture, so its checkpoint resumes.
+    config_lib.check_compatible(stored.to_dict(), config)
+    # Only the recipe and the model: the demo's own data, length and rate
+    # stay.
+    for section in ("dataset", "checkpoint", "eval"):
       self.assertEqual(config[section].to_dict(), plain[section].to_dict())
     self.assertEqual(config.train.num_steps, 5200)
     self.assertEqual(config.train.lr_init, 1.5e-5)
