@@ -54,7 +54,8 @@ class ModelTest(parameterized.TestCase):
     args = _inputs(n=300, e=3000)
     measured = {}
     for split in (True, False):
-      m = models.EncodeProcessDecode(latent_size=32, num_message_passing_steps=2,
+      m = models.EncodeProcessDecode(latent_size=32,
+                                     num_message_passing_steps=2,
                                      split_first_layer=split)
       p = m.init(jax.random.key(0), *args)
       cost = jax.jit(m.apply).lower(p, *args).compile().cost_analysis()
