@@ -14,11 +14,17 @@ late checkpoints average into one model) that everything loading a run
 accepts (``load_run``, evaluation, rollouts, ``config.train.init_from``,
 and resuming training, which continues the last run's optimiser). Its
 ``averaged.json`` names the sources and weights.
+
+A fine-tuning may add a velocity gate (``config.model.velocity_gate``) to
+its parent, so runs with and without one average: the network they share
+over all of them, the gate's head over the runs that have it (their
+weights rescaled to sum to 1). A gated run then comes last, since the
+average keeps the last run's config.
 """
 
 import math
 import os
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import jax
 import numpy as np
@@ -33,6 +39,10 @@ InputError = mpm_scene.InputError
 
 # The record of what an averaged run was made from, in its work directory.
 RECORD = "averaged.json"
+
+# Model settings that may differ between averaged runs: a head that only
+# some of them have (see the module docstring).
+OPTIONAL_HEADS = ("velocity_gate",)
 
 
 def check_weights(weights: Sequence[float], count: int) -> list[float]:
@@ -58,9 +68,12 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
   the average keeps the last run's, as it keeps its optimiser."""
   first = runs[0]
   model = run_lib.model_config_dict(first.config.model)
+  last = run_lib.model_config_dict(runs[-1].config.model)
   for run, name in zip(runs[1:], names[1:]):
     other = run_lib.model_config_dict(run.config.model)
     for key in sorted(set(model) | set(other)):
+      if key in OPTIONAL_HEADS:
+        continue
       if model.get(key) != other.get(key):
         raise InputError(f"{name}: model.{key} is {other.get(key)!r}, "
                          f"{names[0]} has {model.get(key)!r}; only runs of "
@@ -73,6 +86,12 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
       raise InputError(f"{name}: its normalisation statistics differ from "
                        f"{names[0]}'s (other data, or another noise folded "
                        "in?); only runs of one problem can be averaged")
+  for run, name in zip(runs, names):
+    for key in OPTIONAL_HEADS:
+      if run_lib.model_config_dict(run.config.model)[key] and not last[key]:
+        raise InputError(f"{name} has model.{key} and {names[-1]} has "
+                         f"not; list a run with model.{key} last (the "
+                         "average keeps the last run's config)")
 
 
 def _inference_problem(run: run_lib.Run) -> dict:
@@ -85,13 +104,28 @@ def _inference_problem(run: run_lib.Run) -> dict:
 
 
 def average_params(params: Sequence[Any], weights: Sequence[float]) -> Any:
-  """sum_i w_i params_i, leaf by leaf, in the first tree's dtypes."""
-  weights = check_weights(weights, len(params))
-  return jax.tree.map(
-      lambda *leaves: sum(w * np.asarray(leaf, np.float64)
-                          for w, leaf in zip(weights, leaves)
-                          ).astype(np.asarray(leaves[0]).dtype),
-      *params)
+  """sum_i w_i params_i, leaf by leaf, in the first tree's dtypes.
+
+  A subtree that only some of the trees hold (an added head) is the mean
+  over those, their weights rescaled to sum to 1 (equal if all are 0).
+  """
+  return _average(list(params), check_weights(weights, len(params)))
+
+
+def _average(trees: list[Any], weights: list[float]) -> Any:
+  if not all(isinstance(tree, Mapping) for tree in trees):
+    return sum(w * np.asarray(leaf, np.float64)
+               for w, leaf in zip(weights, trees)
+               ).astype(np.asarray(trees[0]).dtype)
+  average = {}
+  for key in dict.fromkeys(key for tree in trees for key in tree):
+    having = [(tree[key], w) for tree, w in zip(trees, weights)
+              if key in tree]
+    total = sum(w for _, w in having)
+    average[key] = _average(
+        [tree for tree, _ in having],
+        [w / total if total > 0 else 1.0 / len(having) for _, w in having])
+  return average
 
 
 def source_workdir(source: str) -> str:

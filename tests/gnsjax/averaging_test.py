@@ -26,6 +26,16 @@ class AverageParamsTest(absltest.TestCase):
     one = averaging.average_params([a, b], [1.0, 0.0])
     jax.tree.map(np.testing.assert_array_equal, one, a)
 
+  def test_a_head_some_trees_lack_averages_over_those_with_it(self):
+    a = {"net": {"w": np.array([1.0])}}
+    b = {"net": {"w": np.array([3.0])}, "gate": {"b": np.array([2.0])}}
+    c = {"net": {"w": np.array([5.0])}, "gate": {"b": np.array([6.0])}}
+    got = averaging.average_params([a, b, c], [0.5, 0.25, 0.25])
+    np.testing.assert_allclose(got["net"]["w"], [2.5])
+    np.testing.assert_allclose(got["gate"]["b"], [4.0])
+    only = averaging.average_params([b, a], [0.0, 1.0])
+    np.testing.assert_allclose(only["gate"]["b"], [2.0])
+
   def test_bad_weights_are_refused(self):
     a = {"w": np.zeros(2)}
     for weights, message in (([0.5, 0.4], "sum to 1"),
@@ -121,6 +131,29 @@ class WriteAverageTest(fixtures.TinyRunTestCase):
     with self.assertRaisesRegex(mpm.InputError, "statistics differ"):
       averaging.write_average([self.base, run("scratch")], [0.5, 0.5],
                               os.path.join(self.dir, "bad"))
+
+  def test_a_fine_tuning_that_adds_a_velocity_gate_averages(self):
+    gated = os.path.join(self.dir, "gated")
+    fine = fixtures.tiny_config(num_steps=2, init_from=self.base,
+                                lr_init=1e-2)
+    fine.model.velocity_gate = True
+    fine.checkpoint.every_steps = 2
+    train.train_and_evaluate(fine, self.data, gated)
+    got = averaging.write_average([self.tuned, gated], [0.25, 0.75],
+                                  os.path.join(self.dir, "soup"))
+    tuned, gate = run_lib.load_run(self.tuned), run_lib.load_run(gated)
+    self.assertTrue(got.config.model.velocity_gate)
+    head = got.params["params"].pop("velocity_gate")
+    jax.tree.map(np.testing.assert_allclose, head,
+                 gate.params["params"].pop("velocity_gate"))
+    jax.tree.map(lambda g, a, b: np.testing.assert_allclose(
+        g, 0.25 * np.asarray(a) + 0.75 * np.asarray(b), rtol=1e-6,
+        atol=1e-7), got.params, tuned.params, gate.params)
+    with self.assertRaisesRegex(mpm.InputError,
+                                "list a run with model.velocity_gate last"):
+      averaging.write_average([gated, self.tuned], [0.5, 0.5],
+                              os.path.join(self.dir, "bad"))
+    self.assertFalse(os.path.exists(os.path.join(self.dir, "bad")))
 
   def test_runs_that_do_not_fit_together_are_refused(self):
     other = os.path.join(self.dir, "other")
