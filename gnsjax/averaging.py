@@ -40,10 +40,6 @@ InputError = mpm_scene.InputError
 # The record of what an averaged run was made from, in its work directory.
 RECORD = "averaged.json"
 
-# Model settings that may differ between averaged runs: a head that only
-# some of them have (see the module docstring).
-OPTIONAL_HEADS = ("velocity_gate",)
-
 
 def check_weights(weights: Sequence[float], count: int) -> list[float]:
   """The weights as floats; InputError unless there are ``count`` of them,
@@ -72,7 +68,7 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
   for run, name in zip(runs[1:], names[1:]):
     other = run_lib.model_config_dict(run.config.model)
     for key in sorted(set(model) | set(other)):
-      if key in OPTIONAL_HEADS:
+      if key in run_lib.ADDED_HEADS:
         continue
       if model.get(key) != other.get(key):
         raise InputError(f"{name}: model.{key} is {other.get(key)!r}, "
@@ -87,7 +83,7 @@ def check_compatible(runs: Sequence[run_lib.Run], names: Sequence[str]
                        f"{names[0]}'s (other data, or another noise folded "
                        "in?); only runs of one problem can be averaged")
   for run, name in zip(runs, names):
-    for key in OPTIONAL_HEADS:
+    for key in run_lib.ADDED_HEADS:
       if run_lib.model_config_dict(run.config.model)[key] and not last[key]:
         raise InputError(f"{name} has model.{key} and {names[-1]} has "
                          f"not; list a run with model.{key} last (the "

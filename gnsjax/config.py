@@ -153,8 +153,8 @@ def check_fine_tuning(stored: dict, config) -> None:
   old = run_lib.model_config_dict(stored.get("model", {}))
   new = run_lib.model_config_dict(config_dict(config)["model"])
   old["smooth_cutoff"] = new["smooth_cutoff"]
-  if new["velocity_gate"]:
-    old["velocity_gate"] = True
+  for head in run_lib.ADDED_HEADS:
+    old[head] = old[head] or new[head]
   compatible = dict(stored, model=old)
   try:
     check_compatible(compatible, config)

@@ -28,6 +28,10 @@ from mpm import io as mpm_io
 # Model settings added after models were shipped, with the value that
 # reproduces a checkpoint written before them.
 MODEL_DEFAULTS = {"smooth_cutoff": 0.0, "velocity_gate": False}
+# Model options that add a head a fine-tuning may add to its parent (its
+# parameters start fresh, ``fine_tuning_params``); runs with and without
+# one average (``gnsjax.averaging``).
+ADDED_HEADS = ("velocity_gate",)
 
 
 def model_config_dict(model_config) -> dict:
