@@ -1,26 +1,27 @@
 #!/usr/bin/env bash
-# Every accelerator figure, on a bare accelerator machine, in one command of
-# under 10 minutes (docs/performance.md, "On an accelerator"):
+# Every accelerator figure, on a bare accelerator machine, in two commands
+# of under 10 minutes on one warm machine (docs/performance.md, "On an
+# accelerator"):
 #
-#   bash experiments/benchmarks/gpu.sh                 # mpm, gns, train
-#   bash experiments/benchmarks/gpu.sh gns             # one part again
+#   bash experiments/benchmarks/gpu.sh mpm,train       # 350 s at most
+#   bash experiments/benchmarks/gpu.sh gns             # 260 s at most
+#   bash experiments/benchmarks/gpu.sh                 # all three, 610 s
 #
 # sent with the ignored .whl/ carried (`make wheels` here first). It installs
 # those wheels into /tmp/site (the machine has jax, flax, optax, orbax, h5py,
 # absl-py, tqdm and matplotlib but not jraph, jax-md, ml-collections, cma or
 # tensorboardX), runs each part in a process of its own under its own time
-# limit (GPU_PART_LIMITS_S, seconds, default "mpm=160 gns=250 train=120":
-# 530 s in all, so that a 15-minute lease holds the machine's start, this
-# and a rerun of one part; on an H200 on 2026-11-26 the parts took 126 s,
-# about 230 s from a cold compilation cache, and 86 s) into out/gpu/, then the report, and copies the
-# part files, the report and the log into $OUT. A part writes its file after
-# each measurement, so one stopped by its limit keeps what it finished (the
-# report marks it partial); the parts after it still run. Rebuild the report
-# here from the files that came back: python -m experiments.benchmarks
+# limit (GPU_PART_LIMITS_S, seconds, default "mpm=200 gns=260 train=150":
+# on an H200 on 2026-11-28 the parts took over 160 s, 247 s and about
+# 135 s, compilation included) into out/gpu/, then the report, and copies
+# the part files, the report and the log into $OUT. A part writes its file
+# after each measurement, so one stopped by its limit keeps what it finished
+# (the report marks it partial); the parts after it still run. Rebuild the
+# report here from the files that came back: python -m experiments.benchmarks
 # --what=gpu --gpu_parts=report --out=DIR.
 set -u
 parts=${1:-mpm,gns,train}
-limits=${GPU_PART_LIMITS_S:-mpm=160 gns=250 train=120}
+limits=${GPU_PART_LIMITS_S:-mpm=200 gns=260 train=150}
 out=${OUT:-out/gpu_results}
 mkdir -p "$out" out/gpu
 source experiments/device_env.sh
