@@ -33,7 +33,7 @@ CONFIG_KEYS = {
               "clean_scale_min",
               "lr_init", "lr_min", "lr_decay_steps", "clip_norm", "node_bucket",
               "capacity_multiplier", "max_wall_time_s", "device_windows",
-              "init_from"),
+              "init_from", "trainable"),
     "checkpoint": ("every_steps", "named_steps", "keep"),
     "eval": ("every_steps", "num_windows", "rollout_steps", "num_rollouts"),
 }

@@ -101,6 +101,9 @@ def get_config() -> ml_collections.ConfigDict:
   # Fine-tuning: a run directory whose latest checkpoint's parameters (and
   # statistics) a new run starts from, at step 0; '': random initialisation.
   config.train.init_from = ""
+  # Only these top-level modules learn (comma-separated, e.g.
+  # 'velocity_gate'); the others keep their values. '': all of them.
+  config.train.trainable = ""
   # Stop (with a checkpoint) after this much training time (s); 0: never.
   config.train.max_wall_time_s = 0.0
   config.train.lr_init = 1e-4

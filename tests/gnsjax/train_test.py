@@ -278,6 +278,31 @@ class TrainTest(fixtures.TinyRunTestCase):
     with self.assertRaisesRegex(mpm.InputError, "init_from = .*'model'"):
       train.train_and_evaluate(back, self.data, os.path.join(self.dir, "b"))
 
+  def test_trainable_modules_alone_learn(self):
+    # A fine-tuning that trains the added gate alone: every other parameter
+    # stays the parent's, the gate's moves; a module the model lacks is
+    # refused by name.
+    base = os.path.join(self.dir, "base")
+    config = fixtures.tiny_config(num_steps=2)
+    config.checkpoint.every_steps = 2
+    train.train_and_evaluate(config, self.data, base)
+    fine = fixtures.tiny_config(num_steps=2, init_from=base, lr_init=1e-2,
+                                trainable="velocity_gate")
+    fine.model.velocity_gate = True
+    fine.checkpoint.every_steps = 2
+    gated = os.path.join(self.dir, "gate_only")
+    train.train_and_evaluate(fine, self.data, gated)
+    got, want = run_lib.load_run(gated), run_lib.load_run(base)
+    gate = got.params["params"].pop("velocity_gate")
+    jax.tree.map(np.testing.assert_array_equal, got.params, want.params)
+    self.assertGreater(np.abs(gate["kernel"]).max(), 0)
+    wrong = fixtures.tiny_config(num_steps=1, init_from=base,
+                                 trainable="velocity_gate,decodr")
+    wrong.model.velocity_gate = True
+    with self.assertRaisesRegex(mpm.InputError, "trainable.*'decodr'.*"
+                                "allowed.*'decoder'"):
+      train.train_and_evaluate(wrong, self.data, os.path.join(self.dir, "w"))
+
   def test_fine_tuning_takes_its_noise_from_the_config(self):
     # The parent's statistics (noise folded in), the config's noise: the
     # same noise a run from scratch with that config would draw.
