@@ -47,6 +47,7 @@ from gnsjax import graph
 from gnsjax import metrics as metrics_lib
 from gnsjax import models
 from gnsjax import noise as noise_lib
+from gnsjax import optimizer as optimizer_lib
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
 from gnsjax import simulator
@@ -69,51 +70,6 @@ class TrainState:
   key: jax.Array
 
 
-def learning_rate_schedule(lr_init: float, lr_min: float, decay_steps: int):
-  """GNS decay: lr_min + (lr_init - lr_min) 0.1^(step / decay_steps).
-
-  (optax.exponential_decay's end_value clamps instead of adding a floor.)
-  """
-  def schedule(step):
-    return lr_min + (lr_init - lr_min) * 0.1**(step / decay_steps)
-  return schedule
-
-
-def trainable_modules(train_config) -> tuple:
-  """The top-level modules ``train.trainable`` names ('': all of them)."""
-  names = getattr(train_config, "trainable", "")
-  return tuple(n.strip() for n in names.split(",") if n.strip())
-
-
-def create_optimizer(train_config) -> optax.GradientTransformation:
-  """Adam on the GNS schedule after clipping the gradient's global norm.
-
-  With ``train.trainable`` set, only those top-level modules learn (their
-  gradient alone is clipped); the others keep their values and carry no
-  optimiser state.
-  """
-  schedule = learning_rate_schedule(train_config.lr_init, train_config.lr_min,
-                                    train_config.lr_decay_steps)
-  tx = optax.chain(optax.clip_by_global_norm(train_config.clip_norm),
-                   optax.adam(schedule))
-  modules = trainable_modules(train_config)
-  if not modules:
-    return tx
-
-  def labels(params):
-    inner = params["params"]
-    unknown = set(modules) - set(inner)
-    if unknown:
-      raise config_lib.InputError(
-          f"config.train.trainable names {sorted(unknown)}; allowed: the "
-          f"model's modules {sorted(inner)}, comma-separated, or '' for all")
-    return {"params": {k: jax.tree.map(
-        lambda _, k=k: "train" if k in modules else "frozen", v)
-                       for k, v in inner.items()}}
-  return optax.multi_transform({"train": tx, "frozen": optax.set_to_zero()},
-                               labels)
-
-
 def _mesh():
   # Every process's devices: jax.devices() is the same list in all of them.
   devices = np.array(jax.devices())
@@ -127,7 +83,7 @@ class Trainer:
     self.config = config
     self.problem = problem
     self.model = run_lib.create_model(config.model)
-    self.tx = create_optimizer(config.train)
+    self.tx = optimizer_lib.create_optimizer(config.train)
     self.mesh = _mesh()
     self.batch_sharding = jax.sharding.NamedSharding(
         self.mesh, jax.sharding.PartitionSpec("batch"))
@@ -518,8 +474,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   writer = (tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
             if lead else None)
   csv_path = os.path.join(workdir, "metrics.csv")
-  schedule = learning_rate_schedule(tcfg.lr_init, tcfg.lr_min,
-                                    tcfg.lr_decay_steps)
+  schedule = optimizer_lib.learning_rate_schedule(
+      tcfg.lr_init, tcfg.lr_min, tcfg.lr_decay_steps)
   start = int(state.step)
   metrics = {}
   # The logged training time is process 0's (the others read its log).

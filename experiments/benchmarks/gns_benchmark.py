@@ -11,7 +11,7 @@ Its inputs are built in ``gns_inputs``, the programs it times in
 1. the forward step (features + model: one call that turns a window of
    C = 6 input frames into normalised accelerations) and the training step
    (forward + backward of ``gnsjax.simulator.loss``, gradient clipping and
-   Adam from ``gnsjax.train.create_optimizer``) of the paper model
+   Adam from ``gnsjax.optimizer.create_optimizer``) of the paper model
    (``configs/paper.py``) and the small model (``configs/small.py``), at batch
    1, on two graphs:
 

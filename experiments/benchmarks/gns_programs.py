@@ -20,6 +20,7 @@ from experiments import timing
 from experiments.benchmarks import gns_inputs
 from gnsjax import features
 from gnsjax import models
+from gnsjax import optimizer
 from gnsjax import run as run_lib
 from gnsjax import simulator
 from gnsjax import train
@@ -148,7 +149,7 @@ class Runner:
   def __init__(self, config, g: gns_inputs.BenchGraph, params=None,
                padded: bool = False):
     self.model = run_lib.create_model(config.model)
-    self.tx = train.create_optimizer(config.train)
+    self.tx = optimizer.create_optimizer(config.train)
     self.params = init_params(self.model) if params is None else params
     s, r = ((g.padded_senders, g.padded_receivers) if padded
             else (g.senders, g.receivers))

@@ -140,7 +140,7 @@ def to_markdown(results: dict[str, Any]) -> str:
       "before the clock starts and holds exactly the graph's edges. "
       + input_layer_note(results) + " "
       "Training step: `simulator.loss`, its gradient, clipping and Adam "
-      "(`train.create_optimizer`), batch 1, state donated; no noise. "
+      "(`optimizer.create_optimizer`), batch 1, state donated; no noise. "
       "GFLOP/s: the dense layers' FLOPs (`models.processor_flops` + "
       "encoders + decoder) per second. Each row's forward, training step "
       f"and a jitted {mm['size']}x{mm['size']} float32 matmul (the "
