@@ -1,7 +1,6 @@
 """The training optimiser: Adam on the GNS learning-rate schedule after
 clipping the gradient's global norm, optionally on some modules only."""
 
-import jax
 import optax
 
 from gnsjax import config as config_lib
@@ -19,8 +18,8 @@ def learning_rate_schedule(lr_init: float, lr_min: float, decay_steps: int):
 
 def trainable_modules(train_config) -> tuple:
   """The top-level modules ``train.trainable`` names ('': all of them)."""
-  names = getattr(train_config, "trainable", "")
-  return tuple(n.strip() for n in names.split(",") if n.strip())
+  names = train_config.trainable.split(",")
+  return tuple(n.strip() for n in names if n.strip())
 
 
 def create_optimizer(train_config) -> optax.GradientTransformation:
@@ -45,8 +44,8 @@ def create_optimizer(train_config) -> optax.GradientTransformation:
       raise config_lib.InputError(
           f"config.train.trainable names {sorted(unknown)}; allowed: the "
           f"model's modules {sorted(inner)}, comma-separated, or '' for all")
-    return {"params": {k: jax.tree.map(
-        lambda _, k=k: "train" if k in modules else "frozen", v)
-                       for k, v in inner.items()}}
+    # A prefix of the parameters: one label per top-level module.
+    return {"params": {k: "train" if k in modules else "frozen"
+                       for k in inner}}
   return optax.multi_transform({"train": tx, "frozen": optax.set_to_zero()},
                                labels)
