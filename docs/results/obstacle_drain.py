@@ -10,7 +10,7 @@ share that drained in the last half second; then the means over the group.
 
   python docs/results/obstacle_drain.py MODEL_DIR [SPACINGS [INDICES]]
 
-e.g. experiments/pretrained/small 0.005,0.0025 18,81,88 (about 5 min on one
+e.g. experiments/pretrained/small 0.005,0.0025 18,81,88 (about 8 min on one
 core: the MPM at 2.5 mm takes 40-80 s a scene).
 """
 import sys
@@ -18,6 +18,7 @@ import sys
 import numpy as np
 
 import mpm
+from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
 from mpm import dataset
@@ -37,11 +38,11 @@ run = run_lib.load_run(workdir)
 
 def shares(positions_at) -> tuple[float, float, float]:
   """(share above X_CUT at each of FRAMES, the drop between them)."""
-  a, b = ((positions_at(f)[:, 0] > X_CUT).mean() for f in FRAMES)
+  a, b = (1 - metrics.mass_past(positions_at(f), [X_CUT])[0] for f in FRAMES)
   return a, b, a - b
 
 
-rows = {"mpm 10 mm": [], workdir: []}
+rows = {}
 for index, t in enumerate(mpm_io.read_trajectories("data/small1000/test.h5")):
   if dataset.group_of(t.scene.name) != "rectangle_x1.3":
     continue
@@ -49,7 +50,8 @@ for index, t in enumerate(mpm_io.read_trajectories("data/small1000/test.h5")):
                                                 run.problem).positions)
   step_of = {f: s for s, f in enumerate(rollout_lib.predicted_frame_indices(
       len(t.positions), run.problem.input_frames, run.problem.frame_stride))}
-  measured = {"mpm 10 mm": shares(lambda f: np.asarray(t.positions[f])),
+  stored = f"mpm {t.scene.granular.spacing * 1000:g} mm"
+  measured = {stored: shares(lambda f: np.asarray(t.positions[f])),
               workdir: shares(lambda f: x[step_of[f]])}
   if index in finer_indices:
     for spacing in spacings:
@@ -57,9 +59,8 @@ for index, t in enumerate(mpm_io.read_trajectories("data/small1000/test.h5")):
                                                         spacing)).positions)
       label = f"mpm {spacing * 1000:g} mm"
       measured[label] = shares(lambda f: q[f])
-      rows.setdefault(label, [])
   for label, value in measured.items():
-    rows[label].append(value)
+    rows.setdefault(label, []).append(value)
     print(f"test {index:3d} {label:>30s}: "
           f"{value[0]:.3f} -> {value[1]:.3f} (drained {value[2]:.3f})",
           flush=True)
