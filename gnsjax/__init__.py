@@ -11,7 +11,9 @@ Modules (import them directly; importing ``gnsjax`` loads nothing heavy):
 - ``gnsjax.models``: the encode-process-decode network (Flax + jraph).
 - ``gnsjax.simulator``, ``gnsjax.rollout``: one step with the solid
   constraint, and the one rollout engine (``rollout.unroll``) under scan.
-- ``gnsjax.train``, ``gnsjax.checkpoint``: training with optax and orbax.
+- ``gnsjax.train``, ``gnsjax.checkpoint``: training with optax and orbax;
+  ``gnsjax.unrolled``, the loss through K learned steps; ``gnsjax.train_eval``,
+  the evaluation a run logs.
 - ``gnsjax.run``: a trained run's problem, and ``load_run`` for inference.
 - ``gnsjax.metrics``: accuracy and flow checks (positional MSE, front,
   deposit, sand inside solids or outside the domain).

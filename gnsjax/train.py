@@ -5,7 +5,8 @@ Each step: B windows (a pure function of
 the step, see ``gnsjax.data.WindowDataset``), padded to a node bucket; random-
 walk noise from ``fold_in(key, step)``; a radius graph from the jax-md
 neighbour list (reallocated on the host when it overflows, never truncated);
-MSE of normalised acceleration; Adam with gradient clipping and the GNS
+MSE of normalised acceleration (or through K learned steps,
+``gnsjax.unrolled``); Adam with gradient clipping and the GNS
 exponential learning-rate decay. A run killed at any moment resumes from its
 last checkpoint and produces the same losses as an uninterrupted run.
 
@@ -44,13 +45,14 @@ from gnsjax import data
 from gnsjax import distributed
 from gnsjax import features
 from gnsjax import graph
-from gnsjax import metrics as metrics_lib
 from gnsjax import models
 from gnsjax import noise as noise_lib
 from gnsjax import optimizer as optimizer_lib
 from gnsjax import rollout as rollout_lib
 from gnsjax import run as run_lib
 from gnsjax import simulator
+from gnsjax import train_eval
+from gnsjax import unrolled
 from mpm import geometry as mpm_geometry
 from mpm import io as mpm_io
 
@@ -144,6 +146,9 @@ class Trainer:
         functools.partial(rollout_lib.unroll,
                           simulator.ModelPredictor(self.model)),
         static_argnames=("spec", "length", "project", "batched"))
+    self._unrolled_step = unrolled.make_train_step(
+        simulator.ModelPredictor(self.model), self.tx, ctx, problem.spec,
+        config.train.pushforward_constrained)
     self._pushforward_nbrs = {}
     self._restored_capacities = {}
 
@@ -249,9 +254,10 @@ class Trainer:
                    ) -> tuple[simulator.Graph, jax.Array]:
     """(graphs with a leading batch axis, targets [B, N, 2]) on the devices.
 
-    The batch holds C + P + 1 frames per window (P = ``pushforward_steps``
-    of the config, 0 without). Without ``pushforward`` the last C + 1 frames
-    are the inputs and the target. With ``pushforward`` = P, the model
+    The batch holds C + 1 frames per window and more (``pushforward_steps``
+    P and ``unroll_steps`` K of the config: C + max(P, K - 1) + 1). Without
+    ``pushforward`` the last C + 1 frames are the inputs and the target.
+    With ``pushforward`` = P, the last C + P + 1 frames are used: the model
     (``params``) first rolls the first C frames (noisy if ``noise``) P
     steps on, without gradient, with the solid constraint as in a rollout
     unless ``train.pushforward_constrained`` is off; its own predictions
@@ -269,8 +275,7 @@ class Trainer:
     positions, moving = put(batch.positions), put(batch.moving)
     types = put(batch.particle_type)
     solids = mpm_geometry.SDFGrid(put(batch.solids), self.problem.sdf_spacing)
-    extra = positions.shape[1] - c - 1
-    start = 0 if pushforward else extra
+    start = positions.shape[1] - c - 1 - pushforward
     window = positions[:, start:start + c + 1]
     if noise:
       inputs, target = self.prepare(key, window, moving, solids)
@@ -280,7 +285,7 @@ class Trainer:
       offset = inputs[:, -1] - window[:, -2]
       inputs = self._push_forward(params, inputs, types, moving, solids,
                                   pushforward)
-      target = self._shift_target(positions[:, c + pushforward], offset,
+      target = self._shift_target(positions[:, -1], offset,
                                   moving, solids)
     elif rest_pushforward:
       tcfg = self.config.train
@@ -313,16 +318,23 @@ class Trainer:
 
   def _push_forward(self, params, inputs, types, moving, solids, steps):
     """Inputs [B, C, N, 2] after ``steps`` learned steps from ``inputs``."""
-    spec = self.problem.spec
     window = jnp.swapaxes(inputs, 0, 1)                   # [C, B, N, 2]
-    n = inputs.shape[2]
+    positions, carried = self._roll(
+        params, rollout_lib.SceneNodes(window, types, moving, solids), steps)
+    frames = jnp.concatenate([window[:-1], carried, positions[-1:]], 0)
+    return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
+
+  def _roll(self, params, scene: rollout_lib.SceneNodes, steps: int):
+    """(positions, carried) [steps, B, N, 2] of ``rollout.unroll`` without
+    gradient, the pushforward neighbour list grown until it holds them."""
+    spec, window = self.problem.spec, scene.window
+    n = window.shape[2]
     nbrs = self._pushforward_nbrs.get(n)
     if nbrs is None:
       nbrs = self._allocate("pushforward", window[-1])
     while True:  # the overflow policy of gnsjax.graph: rerun, grown
       positions, carried, overflow, nbrs, _ = self._unroll(
-          params, rollout_lib.SceneNodes(window, types, moving, solids),
-          nbrs, self.problem.context, spec=spec, length=steps,
+          params, scene, nbrs, self.problem.context, spec=spec, length=steps,
           project=self.config.train.pushforward_constrained, batched=True)
       if not bool(jnp.any(overflow)):
         break
@@ -337,8 +349,37 @@ class Trainer:
         raise RuntimeError("pushforward: the neighbour list overflowed, "
                            "yet holds every step's edges")
     self._pushforward_nbrs[n] = nbrs
-    frames = jnp.concatenate([window[:-1], carried, positions[-1:]], 0)
-    return jnp.swapaxes(frames[-window.shape[0]:], 0, 1)
+    return positions, carried
+
+  def train_unrolled(self, state: TrainState, batch: batching.Batch,
+                     key: jax.Array, steps: int):
+    """One step on the ``steps``-step loss (``gnsjax.unrolled``) from the
+    batch's last C + ``steps`` frames, noisy as ``batch_arrays``'s; a
+    neighbour list that overflows is sized by a rollout and the step
+    rerun from the same state. Returns (state, metrics)."""
+    put, c = self.put, self.problem.input_frames
+    positions, moving = put(batch.positions), put(batch.moving)
+    solids = mpm_geometry.SDFGrid(put(batch.solids), self.problem.sdf_spacing)
+    start = positions.shape[1] - c - steps
+    inputs, _ = self.prepare(key, positions[:, start:start + c + 1], moving,
+                             solids)
+    offset = inputs[:, -1] - positions[:, start + c - 1]
+    truth = unrolled.truth_frames(self._shift_target, positions, offset,
+                                  moving, solids, start + c, steps)
+    scene = rollout_lib.SceneNodes(jnp.swapaxes(inputs, 0, 1),
+                                   put(batch.particle_type), moving, solids)
+    nbrs = self._pushforward_nbrs.get(positions.shape[2])
+    if nbrs is not None:
+      new, metrics, overflow = self._unrolled_step(state, scene, truth, nbrs)
+      if not bool(overflow):
+        return new, metrics
+    self._roll(state.params, scene, steps)
+    new, metrics, overflow = self._unrolled_step(
+        state, scene, truth, self._pushforward_nbrs[positions.shape[2]])
+    if bool(overflow):
+      raise RuntimeError("unrolled training: the neighbour list overflowed, "
+                         "yet holds the rollout's edges")
+    return new, metrics
 
 
 @functools.partial(jax.jit, static_argnums=1)
@@ -351,51 +392,6 @@ def _windows(dataset: data.WindowDataset, step: int, batch_size: int,
   """The windows of batch ``step`` (only ``rows`` of it, if given)."""
   rows = range(batch_size) if rows is None else rows
   return [dataset[step * batch_size + i] for i in rows]
-
-
-def evaluate(trainer: Trainer, state: TrainState, data_dir: str,
-             num_windows: int, rollout_steps: int, num_rollouts: int) -> dict:
-  """One-step loss on test windows (no noise), and rollout position MSE
-  against ground truth and a constant-velocity baseline."""
-  cfg, problem = trainer.config, trainer.problem
-  test_path = data.split_path(data_dir, "test")
-  metrics = {}
-  with data.WindowDataset(test_path, input_frames=problem.input_frames,
-                          frame_stride=problem.frame_stride, seed=0) as ds:
-    windows = [ds[k] for k in range(min(num_windows, len(ds)))]
-  losses = []
-  rows = trainer.rows(cfg.train.batch_size)
-  for i in range(0, len(windows), cfg.train.batch_size):
-    chunk = windows[i:i + cfg.train.batch_size]
-    if len(chunk) < cfg.train.batch_size:
-      break
-    chunk = [chunk[r] for r in rows]
-    graphs, target = trainer.batch_arrays(trainer.make_batch(chunk), None,
-                                          noise=False)
-    losses.append(float(trainer.eval_loss(state.params, graphs, target)))
-  if losses:
-    metrics["eval/one_step_loss"] = float(np.mean(losses))
-  if rollout_steps > 0 and num_rollouts > 0:
-    # Every process rolls out the same trajectories (the same numbers).
-    params = trainer.local_params(state.params)
-    errors, baseline = [], []
-    for k, t in enumerate(data.trajectories(test_path)):
-      if k >= num_rollouts:
-        break
-      frames = rollout_lib.predicted_frame_indices(
-          len(t.positions), problem.input_frames, problem.frame_stride)
-      frames = frames[:rollout_steps]
-      pred = rollout_lib.rollout_trajectory(
-          trainer.model, params, t, problem, len(frames)).positions
-      truth = t.positions[frames]
-      errors.append(np.mean(np.sum((pred - truth)**2, -1)))
-      const = metrics_lib.constant_velocity(t.positions, frames,
-                                            problem.input_frames,
-                                            problem.frame_stride)
-      baseline.append(np.mean(np.sum((const - truth)**2, -1)))
-    metrics["eval/rollout_mse"] = float(np.mean(errors))
-    metrics["eval/rollout_mse_constant_velocity"] = float(np.mean(baseline))
-  return metrics
 
 
 def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
@@ -455,8 +451,10 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
   # examples and the losses) are those of a run without it.
   pushforward = (tcfg.pushforward_steps if tcfg.pushforward_probability > 0
                  else 0)
+  unroll = tcfg.unroll_steps if tcfg.unroll_probability > 0 else 0
+  extra = max(pushforward, unroll - 1)  # frames beyond C + 1 per window
   dataset = data.WindowDataset(data.split_path(data_dir, "train"),
-                               input_frames=tcfg.input_frames + pushforward,
+                               input_frames=tcfg.input_frames + extra,
                                seed=tcfg.seed,
                                frame_stride=tcfg.frame_stride,
                                motion_weighting=tcfg.motion_weighting)
@@ -468,7 +466,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                        "particles are chosen per window on the host)")
     device_windows = batching.DeviceWindows(
         data.split_path(data_dir, "train"), problem.spec,
-        input_frames=tcfg.input_frames + pushforward,
+        input_frames=tcfg.input_frames + extra,
         frame_stride=tcfg.frame_stride, node_bucket=tcfg.node_bucket,
         sdf_spacing=problem.sdf_spacing)
   writer = (tensorboardX.SummaryWriter(os.path.join(workdir, "tensorboard"))
@@ -505,20 +503,29 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
                                             rows))
       # A pure function of (seed, step), so a resumed run pushes forward at
       # the same steps.
-      push = pushforward if pushforward and np.random.default_rng(
-          [tcfg.seed, step, 1]).random() < tcfg.pushforward_probability else 0
+      unrolled_now = unroll if unroll and np.random.default_rng(
+          [tcfg.seed, step, 3]).random() < tcfg.unroll_probability else 0
+      push = pushforward if pushforward and not unrolled_now and (
+          np.random.default_rng([tcfg.seed, step, 1]).random()
+          < tcfg.pushforward_probability) else 0
       rest = tcfg.rest_pushforward_steps if (
-          not push and tcfg.rest_pushforward_steps and np.random.default_rng(
+          not push and not unrolled_now and tcfg.rest_pushforward_steps and
+          np.random.default_rng(
               [tcfg.seed, step, 2]).random() < tcfg.rest_pushforward_probability
           and distributed.agree_any(np.any(noise_lib.still(
               batch.positions, batch.moving, tcfg.frame_stride,
               tcfg.rest_pushforward_speed)))) else 0
       key = jax.random.fold_in(state.key, step)
-      graphs, target = trainer.batch_arrays(batch, key, params=state.params,
-                                            pushforward=push,
-                                            rest_pushforward=rest)
-      weights = None if push else trainer.window_weights(batch, key)
-      state, step_metrics = trainer.train_step(state, graphs, target, weights)
+      if unrolled_now:
+        state, step_metrics = trainer.train_unrolled(state, batch, key,
+                                                     unrolled_now)
+      else:
+        graphs, target = trainer.batch_arrays(
+            batch, key, params=state.params, pushforward=push,
+            rest_pushforward=rest)
+        weights = None if push else trainer.window_weights(batch, key)
+        state, step_metrics = trainer.train_step(state, graphs, target,
+                                                 weights)
       done = step + 1
       loss = float(step_metrics["loss"])
       if not math.isfinite(loss):
@@ -546,9 +553,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
       bar.update(1)
       if cfg.eval.every_steps and (done % cfg.eval.every_steps == 0 or
                                    done == tcfg.num_steps):
-        eval_metrics = evaluate(trainer, state, data_dir,
-                                cfg.eval.num_windows, cfg.eval.rollout_steps,
-                                cfg.eval.num_rollouts)
+        eval_metrics = train_eval.evaluate(
+            trainer, state, data_dir, cfg.eval.num_windows,
+            cfg.eval.rollout_steps, cfg.eval.num_rollouts)
         if lead:
           for k, v in eval_metrics.items():
             writer.add_scalar(k, v, done)

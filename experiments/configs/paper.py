@@ -77,6 +77,12 @@ def get_config() -> ml_collections.ConfigDict:
   # the model learns to stop where its own steps took the sand, not to
   # return to the truth.
   config.train.rest_pushforward_stay = False
+  # Unrolled training: with this probability per batch (drawn before
+  # pushforward, which it replaces on that batch), the loss is taken through
+  # this many learned steps of the model's own rollout, with the gradient
+  # through all of them (gnsjax.unrolled); 0 or 1 step is one-step training.
+  config.train.unroll_steps = 0
+  config.train.unroll_probability = 0.0
   # Noisy targets pushed out of the solids (simulator.add_noise): the model
   # learns to step out of a solid instead of staying inside.
   config.train.target_outside_solids = False

@@ -82,7 +82,7 @@ RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
                "pushforward_steps", "pushforward_probability",
                "pushforward_constrained", "rest_pushforward_steps",
                "rest_pushforward_probability", "rest_pushforward_speed",
-               "rest_pushforward_stay")
+               "rest_pushforward_stay", "unroll_steps", "unroll_probability")
 
 
 # The model options a shipped model may have beyond the small config's: a

@@ -395,6 +395,8 @@ class ProblemTest(absltest.TestCase):
         ("rest_pushforward_steps", -2, "rest_pushforward_steps = -2"),
         ("rest_pushforward_probability", -0.1,
          "rest_pushforward_probability = -0.1"),
+        ("unroll_steps", -1, "unroll_steps = -1"),
+        ("unroll_probability", 2.0, "unroll_probability = 2.0"),
         ("motion_weighting", 2.0, "motion_weighting = 2.0")]:
       with self.assertRaisesRegex(ValueError, message):
         config_lib.check_config(fixtures.tiny_config(**{key: value}))
