@@ -219,6 +219,11 @@ class SettingsTest(parameterized.TestCase):
     with self.assertRaisesRegex(distributed.InputError,
                                 "pushforward training runs on one process"):
       distributed.check_supported(config, 2)
+    config = fixtures.tiny_config(unroll_steps=2, unroll_probability=0.5)
+    distributed.check_supported(config, 1)
+    with self.assertRaisesRegex(distributed.InputError,
+                                "unrolled training runs on one process"):
+      distributed.check_supported(config, 2)
     config = fixtures.tiny_config(device_windows=True)
     with self.assertRaisesRegex(distributed.InputError,
                                 "on-device windows run on one process"):
