@@ -359,9 +359,9 @@ def check_supported(config, num_processes: int) -> None:
 
   Raises:
     InputError: the batch does not split evenly, or the config asks for
-      pushforward or unrolled training or on-device windows, which run on
-      one process only (they build graphs or gather windows from the whole
-      batch).
+      pushforward, rest pushforward, unrolled training or on-device
+      windows, which run on one process only (they build graphs or gather
+      windows from the whole batch).
   """
   tcfg = config.get("train")
   if tcfg is None or "batch_size" not in tcfg:
@@ -378,6 +378,13 @@ def check_supported(config, num_processes: int) -> None:
         f"{tcfg.pushforward_probability} with --num_processes="
         f"{num_processes}: pushforward training runs on one process only; "
         "allowed: pushforward_probability = 0 (or one process)")
+  if (tcfg.rest_pushforward_probability > 0 and
+      tcfg.rest_pushforward_steps > 0):
+    raise InputError(
+        "config.train.rest_pushforward_steps = "
+        f"{tcfg.rest_pushforward_steps} with --num_processes="
+        f"{num_processes}: the rest pushforward runs on one process only; "
+        "allowed: rest_pushforward_steps = 0 (or one process)")
   if tcfg.unroll_probability > 0 and tcfg.unroll_steps > 0:
     raise InputError(
         "config.train.unroll_probability = "

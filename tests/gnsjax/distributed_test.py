@@ -219,6 +219,14 @@ class SettingsTest(parameterized.TestCase):
     with self.assertRaisesRegex(distributed.InputError,
                                 "pushforward training runs on one process"):
       distributed.check_supported(config, 2)
+    # It rolled the whole global batch out in each process and failed on
+    # the first still window with an assertion of jax's; refused now.
+    config = fixtures.tiny_config(rest_pushforward_steps=2,
+                                  rest_pushforward_probability=1.0)
+    distributed.check_supported(config, 1)
+    with self.assertRaisesRegex(distributed.InputError,
+                                "rest pushforward runs on one process"):
+      distributed.check_supported(config, 2)
     config = fixtures.tiny_config(unroll_steps=2, unroll_probability=0.5)
     distributed.check_supported(config, 1)
     with self.assertRaisesRegex(distributed.InputError,
