@@ -207,35 +207,32 @@ class SettingsTest(parameterized.TestCase):
       distributed.handshake(s)
 
 
-  def test_unsupported_configs_are_refused(self):
+  def test_uneven_batch_is_refused(self):
     config = fixtures.tiny_config(batch_size=2)
     distributed.check_supported(config, 2)
     with self.assertRaisesRegex(distributed.InputError,
                                 "batch_size = 2 with --num_processes=3"):
       distributed.check_supported(config, 3)
-    config = fixtures.tiny_config(pushforward_steps=1,
-                                  pushforward_probability=0.5)
+
+  @parameterized.named_parameters(
+      ("pushforward", dict(pushforward_steps=1, pushforward_probability=0.5),
+       "pushforward training runs on one process"),
+      # It rolled the whole global batch out in each process and failed on
+      # the first still window with an assertion of jax's.
+      ("rest_pushforward", dict(rest_pushforward_steps=2,
+                                rest_pushforward_probability=1.0),
+       "rest pushforward runs on one process"),
+      ("unrolled", dict(unroll_steps=2, unroll_probability=0.5),
+       "unrolled training runs on one process"),
+      ("device_windows", dict(device_windows=True),
+       "on-device windows run on one process"),
+  )
+  def test_one_process_options_are_refused(self, train_keys, message):
+    config = fixtures.tiny_config(**train_keys)
     distributed.check_supported(config, 1)
-    with self.assertRaisesRegex(distributed.InputError,
-                                "pushforward training runs on one process"):
+    with self.assertRaisesRegex(distributed.InputError, message):
       distributed.check_supported(config, 2)
-    # It rolled the whole global batch out in each process and failed on
-    # the first still window with an assertion of jax's; refused now.
-    config = fixtures.tiny_config(rest_pushforward_steps=2,
-                                  rest_pushforward_probability=1.0)
-    distributed.check_supported(config, 1)
-    with self.assertRaisesRegex(distributed.InputError,
-                                "rest pushforward runs on one process"):
-      distributed.check_supported(config, 2)
-    config = fixtures.tiny_config(unroll_steps=2, unroll_probability=0.5)
-    distributed.check_supported(config, 1)
-    with self.assertRaisesRegex(distributed.InputError,
-                                "unrolled training runs on one process"):
-      distributed.check_supported(config, 2)
-    config = fixtures.tiny_config(device_windows=True)
-    with self.assertRaisesRegex(distributed.InputError,
-                                "on-device windows run on one process"):
-      distributed.check_supported(config, 2)
+
 
 def _handshakes(counts_and_ids, timeout_s=30.0):
   """Runs ``handshake`` for (num_processes, process_id) pairs at once (the
