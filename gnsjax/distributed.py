@@ -372,31 +372,27 @@ def check_supported(config, num_processes: int) -> None:
                      "of the process count")
   if num_processes == 1:
     return
-  if tcfg.pushforward_probability > 0 and tcfg.pushforward_steps > 0:
-    raise InputError(
-        "config.train.pushforward_probability = "
-        f"{tcfg.pushforward_probability} with --num_processes="
-        f"{num_processes}: pushforward training runs on one process only; "
-        "allowed: pushforward_probability = 0 (or one process)")
-  if (tcfg.rest_pushforward_probability > 0 and
-      tcfg.rest_pushforward_steps > 0):
-    raise InputError(
-        "config.train.rest_pushforward_steps = "
-        f"{tcfg.rest_pushforward_steps} with --num_processes="
-        f"{num_processes}: the rest pushforward runs on one process only; "
-        "allowed: rest_pushforward_steps = 0 (or one process)")
-  if tcfg.unroll_probability > 0 and tcfg.unroll_steps > 0:
-    raise InputError(
-        "config.train.unroll_probability = "
-        f"{tcfg.unroll_probability} with --num_processes={num_processes}: "
-        "unrolled training runs on one process only; allowed: "
-        "unroll_probability = 0 (or one process)")
-  if tcfg.device_windows:
-    raise InputError(
-        f"config.train.device_windows = True with --num_processes="
-        f"{num_processes}: on-device windows run on one process only; "
-        "allowed: device_windows = False (or one process)")
-
+  # (the key named, whether the option is on, what runs in one process,
+  # the allowed value)
+  one_process = (
+      ("pushforward_probability",
+       tcfg.pushforward_probability > 0 and tcfg.pushforward_steps > 0,
+       "pushforward training runs", "0"),
+      ("rest_pushforward_steps",
+       tcfg.rest_pushforward_probability > 0 and
+       tcfg.rest_pushforward_steps > 0, "the rest pushforward runs", "0"),
+      ("unroll_probability",
+       tcfg.unroll_probability > 0 and tcfg.unroll_steps > 0,
+       "unrolled training runs", "0"),
+      ("device_windows", tcfg.device_windows, "on-device windows run",
+       "False"),
+  )
+  for key, used, what, allowed in one_process:
+    if used:
+      raise InputError(
+          f"config.train.{key} = {tcfg[key]} with --num_processes="
+          f"{num_processes}: {what} on one process only; allowed: "
+          f"{key} = {allowed} (or one process)")
 
 def agree_max(values: Sequence[int]) -> tuple[int, ...]:
   """The elementwise maximum of ``values`` over all processes (int32; the
