@@ -28,7 +28,7 @@ CONFIG_KEYS = {
               "pushforward_probability", "pushforward_constrained",
               "rest_pushforward_steps", "rest_pushforward_probability",
               "rest_pushforward_speed", "rest_pushforward_stay",
-              "unroll_steps", "unroll_probability",
+              "unroll_steps", "unroll_probability", "unroll_moving_only",
               "target_outside_solids",
               "clean_fraction", "clean_resting_only", "clean_weight",
               "clean_scale_min",

@@ -83,6 +83,9 @@ def get_config() -> ml_collections.ConfigDict:
   # through all of them (gnsjax.unrolled); 0 or 1 step is one-step training.
   config.train.unroll_steps = 0
   config.train.unroll_probability = 0.0
+  # ... only on batches with no still window: those keep the rest
+  # pushforward, which an unrolled batch would take from them.
+  config.train.unroll_moving_only = False
   # Noisy targets pushed out of the solids (simulator.add_noise): the model
   # learns to step out of a solid instead of staying inside.
   config.train.target_outside_solids = False

@@ -108,6 +108,50 @@ class UnrolledLossTest(fixtures.TinyRunTestCase):
     self.assertEqual(int(state.step), 10)
 
 
+class BatchKindTest(absltest.TestCase):
+  """`train.batch_kind`: which of unrolled, pushforward and rest
+  pushforward a batch gets, against the draws that define it."""
+
+  def _config(self, moving_only):
+    config = fixtures.tiny_config(
+        unroll_steps=4, unroll_probability=0.5, pushforward_steps=3,
+        pushforward_probability=0.5, rest_pushforward_steps=40,
+        rest_pushforward_probability=0.7, unroll_moving_only=moving_only)
+    return config.train
+
+  def _draw(self, step, stream):
+    return np.random.default_rng([0, step, stream]).random()
+
+  def test_moving_only_gives_still_batches_to_the_rest_pushforward(self):
+    for moving_only in (False, True):
+      tcfg = self._config(moving_only)
+      for still in (False, True):
+        for step in range(40):
+          kind = train.batch_kind(tcfg, step, 4, 3, lambda: still)
+          self.assertLessEqual(sum(k > 0 for k in kind), 1)
+          unrolled = (self._draw(step, 3) < 0.5 and
+                      not (moving_only and still))
+          push = not unrolled and self._draw(step, 1) < 0.5
+          rest = (not unrolled and not push and still and
+                  self._draw(step, 2) < 0.7)
+          self.assertEqual(kind, (4 * unrolled, 3 * push, 40 * rest),
+                           (moving_only, still, step))
+
+  def test_the_batch_is_looked_at_once_and_only_when_needed(self):
+    calls = []
+    def any_still():
+      calls.append(1)
+      return True
+    tcfg = self._config(True)
+    for step in range(40):
+      calls.clear()
+      kind = train.batch_kind(tcfg, step, 4, 3, any_still)
+      self.assertLessEqual(len(calls), 1)
+      if self._draw(step, 3) >= 0.5 and self._draw(step, 1) < 0.5:
+        # pushed forward, not unrolled: stillness is not asked
+        self.assertEqual((kind, calls), ((0, 3, 0), []))
+
+
 class UnrolledRunTest(fixtures.TinyRunTestCase):
 
   def _run(self, name, num_steps, **options):
