@@ -39,16 +39,43 @@ flags.DEFINE_float("sigma", 1e-6, "std (m) of the initial offset.")
 flags.DEFINE_string("test", "data/small1000/test.h5", "the test split.")
 flags.DEFINE_list("only", [], "trajectory indices (default: all).")
 flags.DEFINE_integer("seed", 0, "seed of the offsets.")
+flags.DEFINE_string("figure", None, "PNG of the last frames of both runs "
+                    "and their deposit profiles, one panel per scene (for "
+                    "a few scenes, with --only).")
 FLAGS = flags.FLAGS
 
 INPUT_FRAMES, FRAME_STRIDE = 6, 3  # the small config's learned rollout
 REST_WINDOW_S = 0.25  # s: the evaluation's (experiments/studies/evaluation)
 
 
+def plot(panels, path):
+  """The stored and the moved run's last frames, with their deposit
+  profiles (the top of the sand per bin, as ``metrics.deposit_error``)."""
+  import matplotlib  # pylint: disable=g-import-not-at-top
+  matplotlib.use("Agg")
+  import matplotlib.pyplot as plt  # pylint: disable=g-import-not-at-top
+  fig, axes = plt.subplots(len(panels), 1, squeeze=False,
+                           figsize=(9, 3.2 * len(panels)))
+  for ax, (index, moved, stored, error, width) in zip(axes[:, 0], panels):
+    lo = min(moved[:, 0].min(), stored[:, 0].min())
+    hi = max(moved[:, 0].max(), stored[:, 0].max())
+    edges = np.arange(lo, hi + width, width)
+    for x, label, color in ((stored, "stored MPM", "k"),
+                            (moved, f"MPM, moved {FLAGS.sigma:g} m", "C3")):
+      ax.scatter(x[:, 0], x[:, 1], s=3, color=color, label=label)
+      ax.step(edges[:-1], metrics.deposit_profile(x, edges), where="post",
+              color=color, lw=0.8)
+    ax.set(title=f"test {index}: last frame, deposit error {error:.3f} m",
+           xlabel="x (m)", ylabel="y (m)", aspect="equal")
+    ax.legend(loc="upper left", fontsize=7)
+  fig.tight_layout()
+  fig.savefig(path, dpi=110)
+
+
 def main(_):
   rng = np.random.default_rng(FLAGS.seed)
   only = {int(i) for i in FLAGS.only}
-  rows = []
+  rows, panels = [], []
   for index, t in enumerate(data.trajectories(FLAGS.test)):
     if only and index not in only:
       continue
@@ -80,11 +107,15 @@ def main(_):
                                                   t.positions[0]))),
     }
     rows.append(row)
+    panels.append((index, pred[-1], truth[-1], row["deposit_error"],
+                   2 * t.scene.granular.spacing))
     print(f"test {index:3d} {row['group']:>15s}: MSE {row['mean_mse']:.2e} "
           f"front {row['front_error_relative']:.3f} deposit "
           f"{row['deposit_error']:.3f} m KE ratio "
           f"{row['kinetic_energy_ratio']:.2f}", flush=True)
 
+  if FLAGS.figure:
+    plot(panels, FLAGS.figure)
   with open(FLAGS.out, "w", newline="") as f:
     out = csv.DictWriter(f, fieldnames=list(rows[0]))
     out.writeheader()
