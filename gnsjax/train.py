@@ -400,8 +400,8 @@ def batch_kind(tcfg, step: int, unroll: int, pushforward: int,
   """(unrolled steps, pushforward steps, rest pushforward steps) of the
   batch at ``step``, at most one of them nonzero. Each is drawn from
   (``train.seed``, step), so a resumed run makes the same choices;
-  ``any_still()`` (whether the batch holds a still
-  window) is asked only when the choice depends on it, at most once."""
+  ``any_still()`` (whether the batch holds a still window) is asked only
+  when the choice depends on it, at most once."""
   still = functools.cache(any_still)
   unrolled = unroll if unroll and np.random.default_rng(
       [tcfg.seed, step, 3]).random() < tcfg.unroll_probability else 0
