@@ -28,6 +28,7 @@ from absl import app
 from absl import flags
 import numpy as np
 
+from experiments.configs import small
 from gnsjax import data
 from gnsjax import metrics
 from gnsjax import rollout as rollout_lib
@@ -46,7 +47,8 @@ flags.DEFINE_string("figure", None, "PNG of the last frames of both runs "
                     "a few scenes, with --only).")
 FLAGS = flags.FLAGS
 
-INPUT_FRAMES, FRAME_STRIDE = 6, 3  # the small config's learned rollout
+_TRAIN = small.get_config().train  # the small config's learned rollout
+INPUT_FRAMES, FRAME_STRIDE = _TRAIN.input_frames, _TRAIN.frame_stride
 REST_WINDOW_S = 0.25  # s: the evaluation's (experiments/studies/evaluation)
 
 
