@@ -394,6 +394,7 @@ def check_supported(config, num_processes: int) -> None:
           f"{num_processes}: {what} on one process only; allowed: "
           f"{key} = {allowed} (or one process)")
 
+
 def agree_max(values: Sequence[int]) -> tuple[int, ...]:
   """The elementwise maximum of ``values`` over all processes (int32; the
   values themselves in one process). Every process must call it."""
