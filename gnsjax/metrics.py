@@ -17,6 +17,9 @@ Shapes: T steps, N sand particles. Positions in metres.
 - ``constant_velocity``: the baseline every learned model must beat.
 - ``final_speed``: the sand's mean speed over the last steps (m/s): a
   deposit that should rest but jitters in place shows here, not in the MSE.
+- ``over_rest_targets``: whether a trajectory's end misses the rest targets
+  (end speed over :func:`rest_speed_bound`, kinetic-energy ratio over
+  ``REST_KINETIC_ENERGY_RATIO``), as every report counts them.
 """
 
 import math
@@ -29,6 +32,11 @@ from mpm import geometry
 from mpm import scene as scene_lib
 
 FRONT_QUANTILE = 0.01
+# The rest targets (docs/gns.md): learned sand ends no faster than twice the
+# MPM's, or 1 cm/s where the MPM's is slower than 5 mm/s, and with at most
+# 10 times its kinetic energy.
+REST_SPEED_FLOOR = 0.01
+REST_KINETIC_ENERGY_RATIO = 10.0
 
 
 def positional_mse(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
@@ -144,6 +152,28 @@ def final_speed(positions: np.ndarray, times: np.ndarray,
   x, t = positions[-(last + 1):], np.asarray(times, float)[-(last + 1):]
   step = np.linalg.norm(np.diff(x, axis=0), axis=-1)
   return float(np.mean(step / np.diff(t)[:, None]))
+
+
+def rest_speed_bound(mpm_speed, floor: float = REST_SPEED_FLOOR):
+  """The end speed (m/s) learned sand may keep where the MPM's ends at
+  ``mpm_speed`` (m/s, a number or an array): max(2 mpm_speed, floor). The
+  floor spares a deposit the MPM holds dead still a bound no learned step
+  of finite precision can meet."""
+  return np.maximum(2 * np.asarray(mpm_speed, float), floor)
+
+
+def over_rest_targets(final_speed, mpm_final_speed, kinetic_energy_ratio):
+  """Which trajectories miss the rest targets: (over_speed, over_energy),
+  whether the end speed (m/s, :func:`final_speed`) is over
+  :func:`rest_speed_bound` of the MPM's, and whether the kinetic-energy
+  ratio (:func:`kinetic_energy_ratio`) is over
+  ``REST_KINETIC_ENERGY_RATIO``. Numbers or arrays of one shape in,
+  booleans of that shape out."""
+  over_speed = (np.asarray(final_speed, float) >
+                rest_speed_bound(mpm_final_speed))
+  over_energy = (np.asarray(kinetic_energy_ratio, float) >
+                 REST_KINETIC_ENERGY_RATIO)
+  return over_speed, over_energy
 
 
 def front_error_relative(pred: np.ndarray, true: np.ndarray,

@@ -106,7 +106,8 @@ def main(_):
             pred, np.asarray(t.positions), frames * dt,
             np.arange(len(t.positions)) * dt, REST_WINDOW_S),
         "final_speed": speed, "mpm_final_speed": mpm_speed,
-        "over_speed_bound": bool(speed > max(2 * mpm_speed, 0.01)),
+        "over_speed_bound": bool(speed > metrics.rest_speed_bound(
+            mpm_speed)),
         "first_frame_offset": float(np.max(np.abs(again[0] -
                                                   t.positions[0]))),
     }
@@ -127,14 +128,17 @@ def main(_):
   groups = sorted({r["group"] for r in rows})
   for group in ["all"] + groups:
     sel = [r for r in rows if group == "all" or r["group"] == group]
-    fronts = [r["front_error_relative"] for r in sel]
+    col = lambda k: np.array([r[k] for r in sel], float)
+    fronts = col("front_error_relative")
+    over_speed, over_energy = metrics.over_rest_targets(
+        col("final_speed"), col("mpm_final_speed"),
+        col("kinetic_energy_ratio"))
     print(f"{group:>15s} ({len(sel):3d}): MSE "
-          f"{np.mean([r['mean_mse'] for r in sel]):.2e}, front median "
-          f"{np.median(fronts):.3f} worst {np.max(fronts):.3f}, deposit "
-          f"median {np.median([r['deposit_error'] for r in sel]):.3f} m, "
-          f"over 15% {sum(f > 0.15 for f in fronts)}, KE ratio over 10 "
-          f"{sum(r['kinetic_energy_ratio'] > 10 for r in sel)}, over the "
-          f"speed bound {sum(r['over_speed_bound'] for r in sel)}")
+          f"{col('mean_mse').mean():.2e}, front median "
+          f"{np.median(fronts):.3f} worst {fronts.max():.3f}, deposit "
+          f"median {np.median(col('deposit_error')):.3f} m, "
+          f"over 15% {(fronts > 0.15).sum()}, KE ratio over 10 "
+          f"{over_energy.sum()}, over the speed bound {over_speed.sum()}")
 
 
 if __name__ == "__main__":

@@ -17,6 +17,8 @@ import sys
 
 import numpy as np
 
+from gnsjax import metrics
+
 
 def _rows(folder: str) -> dict:
   with open(f"{folder}/trajectories.csv", newline="") as f:
@@ -35,12 +37,13 @@ def main(argv):
   for folder, table in zip(folders, tables):
     col = lambda k: np.array([float(table[i][k]) for i in common])
     front, ke = col("front_error_relative"), col("kinetic_energy_ratio")
-    bound = np.maximum(2 * col("mpm_final_speed"), 0.01)
+    over_speed, over_energy = metrics.over_rest_targets(
+        col("final_speed"), col("mpm_final_speed"), ke)
     print(f"| {folder} | {col('mean_mse').mean():.2e} | "
           f"{np.median(front):.1%} / {front.max():.0%} | "
           f"{(front > 0.1).sum()} / {(front > 0.15).sum()} | "
-          f"{np.median(ke):.2f}; {(ke > 10).sum()} | "
-          f"{(col('final_speed') > bound).sum()} |")
+          f"{np.median(ke):.2f}; {over_energy.sum()} | "
+          f"{over_speed.sum()} |")
 
 
 if __name__ == "__main__":

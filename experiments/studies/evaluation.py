@@ -300,6 +300,12 @@ def group_summary(rows: Sequence[dict]) -> list[dict]:
           col("kinetic_energy_ratio")))
       entry["max_kinetic_energy_ratio"] = float(np.max(
           col("kinetic_energy_ratio")))
+      if len(col("kinetic_energy_ratio")) == len(col("final_speed")):
+        over_speed, over_energy = metrics.over_rest_targets(
+            col("final_speed"), col("mpm_final_speed"),
+            col("kinetic_energy_ratio"))
+        entry["over_speed_bound"] = int(over_speed.sum())
+        entry["over_kinetic_energy_ratio"] = int(over_energy.sum())
     if len(col("held_speed")):
       entry["median_held_speed"] = float(np.median(col("held_speed")))
       entry["max_held_speed"] = float(np.max(col("held_speed")))
@@ -472,6 +478,14 @@ def _rest_pushed(group: dict) -> str:
   return "" if value is None else f"{value:.2%}"
 
 
+def _over_rest(group: dict) -> str:
+  """How many trajectories miss each rest target, speed / energy."""
+  if "over_speed_bound" not in group:
+    return ""
+  return (f"{group['over_speed_bound']} / "
+          f"{group['over_kinetic_energy_ratio']}")
+
+
 def _held(group: dict) -> str:
   """``hold_rest``'s medians, or "not run" (``--rest_steps=0``)."""
   if "median_held_speed" not in group:
@@ -505,7 +519,9 @@ def report(summary: dict[str, Any]) -> str:
       "MPM (median): a deposit that jitters instead of resting shows here. "
       "Kinetic energy: the sand's over the last "
       f"{REST_WINDOW_S:g} s, GNS over MPM (median and worst; "
-      "1 rests as the MPM does). Held: the same model started from the "
+      "1 rests as the MPM does). Over the rest targets: how many "
+      "trajectories end faster than max(2x the MPM's speed, 1 cm/s) / with "
+      "a kinetic-energy ratio over 10. Held: the same model started from the "
       f"MPM's last frames (its deposit) for {summary.get('rest_steps', 0)} "
       "learned steps, the sand's "
       "mean speed at the end and its mean drift (median; a model that fits "
@@ -520,8 +536,8 @@ def report(summary: dict[str, Any]) -> str:
       "worst) | deposit "
       "error (m) | inside | outside | free: inside | pushed/step (all / "
       "rest) | deepest push (m) | speed at end (cm/s) | kinetic energy "
-      "ratio | held: speed (cm/s) / drift (mm) |",
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+      "ratio | over the rest targets | held: speed (cm/s) / drift (mm) |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
   for g in summary["groups"]:
     lines.append(
         f"| {g['group']} | {g['trajectories']} | {g['mean_mse']:.2e} | "
@@ -536,7 +552,8 @@ def report(summary: dict[str, Any]) -> str:
         f"{100 * g['median_final_speed']:.1f} / "
         f"{100 * g['median_mpm_final_speed']:.1f} | "
         f"{_ratio(g.get('median_kinetic_energy_ratio'))} / "
-        f"{_ratio(g.get('max_kinetic_energy_ratio'))} | {_held(g)} |")
+        f"{_ratio(g.get('max_kinetic_energy_ratio'))} | "
+        f"{_over_rest(g)} | {_held(g)} |")
   lines += [
       "", "## Test error by checkpoint (Fig. 5)", "",
       f"Over the first {summary['checkpoint_trajectories']} test "

@@ -114,6 +114,21 @@ class MetricsTest(absltest.TestCase):
     with self.assertRaisesRegex(ValueError, "need as many"):
       metrics.final_speed(x, times[:-1])
 
+  def test_rest_targets_by_hand(self):
+    # The MPM's sand at 0 / 4 mm/s / 2 cm/s: the bound is the 1 cm/s
+    # floor, the floor again (8 mm/s < 1 cm/s), then twice the MPM's.
+    mpm = np.array([0.0, 0.004, 0.02])
+    np.testing.assert_allclose(metrics.rest_speed_bound(mpm),
+                               [0.01, 0.01, 0.04])
+    self.assertEqual(float(metrics.rest_speed_bound(0.02, floor=0.05)), 0.05)
+    over_speed, over_energy = metrics.over_rest_targets(
+        [0.0099, 0.0101, 0.04], mpm, [10.0, 10.5, 0.1])
+    np.testing.assert_array_equal(over_speed, [False, True, False])
+    np.testing.assert_array_equal(over_energy, [False, True, False])
+    over_speed, over_energy = metrics.over_rest_targets(0.05, 0.02, 11.0)
+    self.assertTrue(over_speed)
+    self.assertTrue(over_energy)
+
   def test_rest_metrics_by_hand(self):
     # 3 particles: moving at 0.1 m/s in x until t = 0.5 s, then at rest
     # except particle 0, which creeps at 1 mm/s.

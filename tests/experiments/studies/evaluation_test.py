@@ -137,7 +137,7 @@ class ScoreTest(absltest.TestCase):
          "front_error_relative": 0.5, "deposit_error": 0.05,
          "max_inside_solids": 0.1, "max_outside_domain": 0.3,
          "mean_pushed_fraction": 0.2, "max_pushed_depth": 5e-3,
-         "final_speed": 0.2, "mpm_final_speed": 0.02,
+         "final_speed": 0.2, "mpm_final_speed": 0.15,
          "kinetic_energy_ratio": 10.0}]
     groups = {g["group"]: g for g in evaluation.group_summary(rows)}
     self.assertEqual(sorted(groups), ["a", "all", "b"])
@@ -155,6 +155,12 @@ class ScoreTest(absltest.TestCase):
     self.assertAlmostEqual(every["median_mpm_final_speed"], 0.01)
     self.assertAlmostEqual(every["median_kinetic_energy_ratio"], 10.0)
     self.assertAlmostEqual(every["max_kinetic_energy_ratio"], 3000.0)
+    # Speed bounds 1, 2 and 30 cm/s: the first two end over theirs, the
+    # third under; kinetic-energy ratios 2, 3000 and exactly 10.
+    self.assertEqual(every["over_speed_bound"], 2)
+    self.assertEqual(groups["b"]["over_speed_bound"], 0)
+    self.assertEqual(every["over_kinetic_energy_ratio"], 1)
+    self.assertEqual(groups["b"]["over_kinetic_energy_ratio"], 0)
     self.assertAlmostEqual(a["mean_mse"], 2.0)
     self.assertAlmostEqual(a["median_deposit_error"], 0.02)
     self.assertAlmostEqual(a["mean_pushed_fraction"], 0.2)
