@@ -38,6 +38,7 @@ import optax
 import tensorboardX
 import tqdm
 
+from gnsjax import batch_kinds
 from gnsjax import batching
 from gnsjax import checkpoint
 from gnsjax import config as config_lib
@@ -387,37 +388,6 @@ def _batched_edges(nbrs, n):
   return jax.vmap(lambda nb: graph.edges(nb, n))(nbrs)
 
 
-def _any_still(batch: batching.Batch, tcfg) -> bool:
-  """Whether any window of ``batch`` is still (``noise.still`` at
-  ``train.rest_pushforward_speed``), on every process."""
-  return distributed.agree_any(np.any(noise_lib.still(
-      batch.positions, batch.moving, tcfg.frame_stride,
-      tcfg.rest_pushforward_speed)))
-
-
-def batch_kind(tcfg, step: int, unroll: int, pushforward: int,
-               any_still) -> tuple[int, int, int]:
-  """(unrolled steps, pushforward steps, rest pushforward steps) of the
-  batch at ``step``, at most one of them nonzero. Each is drawn from
-  (``train.seed``, step), so a resumed run makes the same choices;
-  ``any_still()`` (whether the batch holds a still window) is asked only
-  when the choice depends on it, at most once."""
-  still = functools.cache(any_still)
-  unrolled = unroll if unroll and np.random.default_rng(
-      [tcfg.seed, step, 3]).random() < tcfg.unroll_probability else 0
-  if unrolled and tcfg.unroll_moving_only and still():
-    unrolled = 0
-  push = pushforward if pushforward and not unrolled and (
-      np.random.default_rng([tcfg.seed, step, 1]).random()
-      < tcfg.pushforward_probability) else 0
-  rest = tcfg.rest_pushforward_steps if (
-      not push and not unrolled and tcfg.rest_pushforward_steps and
-      np.random.default_rng(
-          [tcfg.seed, step, 2]).random() < tcfg.rest_pushforward_probability
-      and still()) else 0
-  return unrolled, push, rest
-
-
 def _windows(dataset: data.WindowDataset, step: int, batch_size: int,
              rows: range | None = None):
   """The windows of batch ``step`` (only ``rows`` of it, if given)."""
@@ -532,9 +502,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, data_dir: str,
       else:
         batch = trainer.make_batch(_windows(dataset, step, tcfg.batch_size,
                                             rows))
-      unrolled_now, push, rest = batch_kind(
+      unrolled_now, push, rest = batch_kinds.choose(
           tcfg, step, unroll, pushforward,
-          functools.partial(_any_still, batch, tcfg))
+          functools.partial(batch_kinds.any_still, batch, tcfg))
       key = jax.random.fold_in(state.key, step)
       if unrolled_now:
         state, step_metrics = trainer.train_unrolled(state, batch, key,

@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gnsjax import batch_kinds
 from gnsjax import data
 from gnsjax import graph
 from gnsjax import rollout
@@ -109,7 +110,7 @@ class UnrolledLossTest(fixtures.TinyRunTestCase):
 
 
 class BatchKindTest(absltest.TestCase):
-  """`train.batch_kind`: which of unrolled, pushforward and rest
+  """`batch_kinds.choose`: which of unrolled, pushforward and rest
   pushforward a batch gets, against the draws that define it."""
 
   def _config(self, moving_only):
@@ -127,7 +128,7 @@ class BatchKindTest(absltest.TestCase):
       tcfg = self._config(moving_only)
       for still in (False, True):
         for step in range(40):
-          kind = train.batch_kind(tcfg, step, 4, 3, lambda: still)
+          kind = batch_kinds.choose(tcfg, step, 4, 3, lambda: still)
           self.assertLessEqual(sum(k > 0 for k in kind), 1)
           unrolled = (self._draw(step, 3) < 0.5 and
                       not (moving_only and still))
@@ -145,7 +146,7 @@ class BatchKindTest(absltest.TestCase):
     tcfg = self._config(True)
     for step in range(40):
       calls.clear()
-      kind = train.batch_kind(tcfg, step, 4, 3, any_still)
+      kind = batch_kinds.choose(tcfg, step, 4, 3, any_still)
       self.assertLessEqual(len(calls), 1)
       if self._draw(step, 3) >= 0.5 and self._draw(step, 1) < 0.5:
         # pushed forward, not unrolled: stillness is not asked
