@@ -1,7 +1,7 @@
 """Where a model's fronts go wrong: its worst test trajectories, rolled out.
 
-For each test trajectory INDEX of data/small1000, the model is rolled out
-over the whole 1.5 s with the solid constraint. Top row: the front (the
+For each test trajectory INDEX of data/small1000 (or DATA), the model is
+rolled out over the whole 1.5 s with the solid constraint. Top row: the front (the
 1% quantile of the sand's x, `gnsjax.metrics.runout`) over time, learned
 against the MPM's. Middle row: the two at the moment the learned front
 leaves the MPM's by 5 cm (or the last frame). Bottom row: the last frame.
@@ -10,6 +10,8 @@ Printed per trajectory: the final fronts and the mean speeds over the last
 
   python docs/results/worst_fronts.py experiments/pretrained/small \
       docs/results/ft_rcr_pf3_avg3_all/worst_fronts.png 13,27,96,8,89,25
+  python docs/results/worst_fronts.py MODEL OUT.png 85,57 data/small_select
+(the last argument: another dataset directory, whose test split is used)
 """
 import sys
 
@@ -28,10 +30,11 @@ from gnsjax import run as run_lib  # pylint: disable=g-import-not-at-top
 PARTING_M = 0.05
 
 
-def main(model_dir: str, out: str, indices: list[int]):
+def main(model_dir: str, out: str, indices: list[int],
+         data_dir: str = "data/small1000"):
   run = run_lib.load_run(model_dir)
   trajectories = list(data.trajectories(
-      data.split_path("data/small1000", "test")))
+      data.split_path(data_dir, "test")))
   c, k = run.problem.input_frames, run.problem.frame_stride
   fig, axes = plt.subplots(3, len(indices), squeeze=False,
                            figsize=(4.2 * len(indices), 8.4))
@@ -65,4 +68,5 @@ def main(model_dir: str, out: str, indices: list[int]):
 
 
 if __name__ == "__main__":
-  main(sys.argv[1], sys.argv[2], [int(i) for i in sys.argv[3].split(",")])
+  main(sys.argv[1], sys.argv[2], [int(i) for i in sys.argv[3].split(",")],
+       *sys.argv[4:5])
