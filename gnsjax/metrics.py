@@ -20,6 +20,8 @@ Shapes: T steps, N sand particles. Positions in metres.
 - ``over_rest_targets``: whether a trajectory's end misses the rest targets
   (end speed over :func:`rest_speed_bound`, kinetic-energy ratio over
   ``REST_KINETIC_ENERGY_RATIO``), as every report counts them.
+- ``paired_difference``: how far two models' scores on the same scenes
+  differ, against what the draw of the scenes moves.
 """
 
 import math
@@ -174,6 +176,20 @@ def over_rest_targets(final_speed, mpm_final_speed, kinetic_energy_ratio):
   over_energy = (np.asarray(kinetic_energy_ratio, float) >
                  REST_KINETIC_ENERGY_RATIO)
   return over_speed, over_energy
+
+
+def paired_difference(a, b) -> tuple[float, float]:
+  """The mean of a - b over paired samples [S] (two models' scores on the
+  same S scenes) and twice its standard error, both in percent of the
+  mean of b. A difference within the two standard errors is within what
+  another draw of S scenes would move."""
+  a, b = np.asarray(a, float), np.asarray(b, float)
+  if a.shape != b.shape or a.ndim != 1 or len(a) < 2:
+    raise ValueError(f"paired_difference: two [S] arrays with S >= 2; got "
+                     f"shapes {a.shape} and {b.shape}")
+  d, scale = a - b, 100 / np.mean(b)
+  two_se = 2 * np.std(d, ddof=1) / math.sqrt(len(d))
+  return float(np.mean(d) * scale), float(two_se * scale)
 
 
 def front_error_relative(pred: np.ndarray, true: np.ndarray,

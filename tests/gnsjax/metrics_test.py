@@ -129,6 +129,22 @@ class MetricsTest(absltest.TestCase):
     self.assertTrue(over_speed)
     self.assertTrue(over_energy)
 
+  def test_paired_difference_by_hand(self):
+    # Differences 1, 3 (mean 2, sample std sqrt(2)) on a mean of 4.
+    # The standard error: sqrt(2) / sqrt(2) = 1; twice it, 50% of 4.
+    mean, two_se = metrics.paired_difference([4.0, 8.0], [3.0, 5.0])
+    self.assertAlmostEqual(mean, 50.0)
+    self.assertAlmostEqual(two_se, 50.0)
+    # The pairing counts: scenes that differ a lot between each other but
+    # not between the models give a small error.
+    # (Unpaired, the scenes' own spread would make it about 170%.)
+    b = np.array([1.0, 10.0, 100.0, 1000.0])
+    mean, two_se = metrics.paired_difference(b + [2.0, 3.0, 2.0, 3.0], b)
+    self.assertAlmostEqual(mean, 100 * 2.5 / np.mean(b))
+    self.assertLess(two_se, 0.25)
+    with self.assertRaisesRegex(ValueError, "S >= 2"):
+      metrics.paired_difference([1.0], [2.0])
+
   def test_rest_metrics_by_hand(self):
     # 3 particles: moving at 0.1 m/s in x until t = 0.5 s, then at rest
     # except particle 0, which creeps at 1 mm/s.
