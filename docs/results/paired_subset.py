@@ -52,7 +52,7 @@ def main(argv):
     front, ke = col("front_error_relative"), col("kinetic_energy_ratio")
     over_speed, over_energy = metrics.over_rest_targets(
         col("final_speed"), col("mpm_final_speed"), ke)
-    print(f"| {folder} | {col('mean_mse').mean():.2e} | "
+    print(f"| {folder} | {mse.mean():.2e} | "
           f"{np.median(front):.1%} / {front.max():.0%} | "
           f"{(front > 0.1).sum()} / {(front > 0.15).sum()} | "
           f"{np.median(ke):.2f}; {over_energy.sum()} | "

@@ -1,12 +1,12 @@
 """Where a model's fronts go wrong: its worst test trajectories, rolled out.
 
 For each test trajectory INDEX of data/small1000 (or DATA), the model is
-rolled out over the whole 1.5 s with the solid constraint. Top row: the front (the
-1% quantile of the sand's x, `gnsjax.metrics.runout`) over time, learned
-against the MPM's. Middle row: the two at the moment the learned front
-leaves the MPM's by 5 cm (or the last frame). Bottom row: the last frame.
-Printed per trajectory: the final fronts and the mean speeds over the last
-5 learned steps.
+rolled out over the whole 1.5 s with the solid constraint. Top row: the
+front (the 1% quantile of the sand's x, `gnsjax.metrics.runout`) over
+time, learned against the MPM's. Middle row: the two at the moment the
+learned front leaves the MPM's by 5 cm (or the last frame). Bottom row:
+the last frame. Printed per trajectory: the final fronts and the mean
+speeds over the last 5 learned steps.
 
   python docs/results/worst_fronts.py experiments/pretrained/small \
       docs/results/ft_rcr_pf3_avg3_all/worst_fronts.png 13,27,96,8,89,25
