@@ -1,6 +1,6 @@
 """Two models' rollouts of one test trajectory beside the MPM's (the ramp
 and the obstacles drawn), at four frames up to the last, and their sand's
-mean speed near the end (the pictures docs/gns.md cites from
+mean speed near the end (the pictures docs/gns_log.md cites from
 rest_cleanrest_avg5_all/, ft_rcr_clean10_avg3_all/ and
 ft_rcr_quiet_avg3_all/):
 

@@ -1,5 +1,5 @@
 """Lone particles sliding on the runout floor: does a learned model stop
-them as Coulomb friction would? (docs/gns.md, "Training on: longer, or with
+them as Coulomb friction would? (docs/gns_log.md, "Training on: longer, or with
 a larger batch"; its output is lone_particles.txt.)
 
   python docs/results/lone_particles.py MODEL [MODEL ...]

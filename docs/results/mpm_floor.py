@@ -2,7 +2,7 @@
 end when they differ by far less than the data resolve. The learned
 simulator is scored against one such run (the stored trajectory); what the
 MPM cannot reproduce of itself bounds what any model can be asked to
-(docs/gns.md, "The MPM against itself").
+(docs/gns_log.md, "The MPM against itself").
 
 Each test scene of data/small1000 is run again by ``mpm.simulate`` with its
 initial particles moved by a random offset of std SIGMA in each coordinate

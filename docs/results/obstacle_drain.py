@@ -1,8 +1,8 @@
 """How much sand drains off the rectangle high on the ramp (the test group
 rectangle_x1.3) late in the avalanche: the MPM's stored 10 mm trajectories,
 a learned model's rollouts and, for a few scenes, the MPM run again at finer
-particle spacings (the output in docs/gns.md, "The drain off the high
-rectangle").
+particle spacings (the output in docs/gns_log.md, "A third stage from the
+shipped soup, and the drain off the high rectangle").
 
 Prints, per scene, the share of the sand above x = 1.15 m (on or behind the
 rectangle) at frames 405 (1.0 s) and 597 (1.5 s), and their difference, the

@@ -32,7 +32,7 @@ class Sizes:
       timing).
     train_config: config of the timed training.
     second_train_config: a second config timed the same way ("" skips):
-      the small config, whose recipe searches (docs/gns.md) are what an
+      the small config, whose recipe searches (docs/gns_log.md) are what an
       accelerator would shorten.
     train_trajectories: training trajectories generated for it, of
       ``train_frames`` frames.

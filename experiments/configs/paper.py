@@ -97,7 +97,7 @@ def get_config() -> ml_collections.ConfigDict:
   config.train.clean_resting_only = False
   # The clean windows' loss counts this many times: their targets (exact
   # rest) are small beside the moving windows'. 10 did not lower the rest
-  # floor, and from scratch it raised it (docs/gns.md).
+  # floor, and from scratch it raised it (docs/gns_log.md).
   config.train.clean_weight = 1.0
   # 0: those windows get no noise; m > 0: their noise std is scaled by a
   # factor drawn log-uniformly in [m, 1] per window (noise.quiet_scale),

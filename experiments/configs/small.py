@@ -30,7 +30,7 @@ def get_config():
   # Noisy targets pushed out of the solids: the resting heap stops leaning
   # on the solid constraint (docs/gns.md). The shipped model learned it in
   # a 12000-step fine-tuning at lr 2e-5 (provenance.json); from scratch
-  # with it, the same 40000 steps did worse (docs/gns.md).
+  # with it, the same 40000 steps did worse (docs/gns_log.md).
   config.train.target_outside_solids = True
 
   config.train.num_steps = 40000
@@ -38,7 +38,7 @@ def get_config():
   config.train.lr_decay_steps = 40000
   config.train.node_bucket = 64
   config.checkpoint.every_steps = 500
-  # Kept for the shipped model, the mean of the last five (docs/gns.md):
+  # Kept for the shipped model, the mean of the last five (docs/gns_log.md):
   # one checkpoint is one draw from a wide spread.
   config.checkpoint.named_steps = (8000, 16000, 24000, 32000, 34000, 36000,
                                    38000, 40000)
