@@ -85,14 +85,37 @@ def _padded(run, trajectories):
 
 
 def _teacher_windows(t, c: int, k: int) -> np.ndarray:
-  """[S, C, N, 2]: the input window of every learned step of ``t``."""
+  """[S, C, N, 2]: the input window of every learned step of ``t``, as a
+  rollout started at each step's first input frame would see it."""
   pos = np.asarray(t.positions, np.float32)
-  ends = rollout.predicted_frame_indices(len(pos), c, k)
-  return np.stack([pos[i - c * k:i:k] for i in ends])
+  starts = rollout.predicted_frame_indices(len(pos), c, k) - c * k
+  return np.stack([pos[s + rollout.input_frame_indices(c, k)]
+                   for s in starts])
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _teacher_steps(predictor, spec, radius, params, windows, scene_arrays,
+                   context, nbrs):
+  """Sum of every step's prediction along ``windows`` [S, C, N, 2] (so the
+  work is not optimised away) and whether the edges ever overflowed."""
+  types, moving, solids = scene_arrays
+
+  def body(nb, w):
+    nb = graph.update(spec, w[-1], nb)
+    senders, receivers = graph.edges(nb, w.shape[-2])
+    g = simulator.Graph(w, types, moving, senders, receivers, solids)
+    nxt, _, _ = simulator.step(predictor, params, g, context, radius, True)
+    return nb, (nxt.sum(), nb.did_buffer_overflow)
+
+  _, (out, overflow) = jax.lax.scan(body, nbrs, windows)
+  return out.sum(), jnp.any(overflow)
 
 
 def _teacher(run, trajectories):
   prob = run.problem
+  if prob.boundary_particles:
+    raise ValueError(f"{_MODEL.value}: --mode=teacher times sand-only "
+                     "graphs; this model has boundary particles")
   c, k = prob.input_frames, prob.frame_stride
   print("| scene | particles | M | R (m) | edge capacity | s / trajectory "
         "| ratio to M=5, R=0.03 |")
@@ -101,8 +124,8 @@ def _teacher(run, trajectories):
     scene = rollout.trajectory_nodes(t, c, k, prob.boundary_particles,
                                      prob.sdf_spacing)
     windows = jnp.asarray(_teacher_windows(t, c, k))
-    types, moving = jnp.asarray(scene.types), jnp.asarray(scene.moving)
-    solids = jax.tree.map(jnp.asarray, scene.solids)
+    scene_arrays = jax.tree.map(jnp.asarray,
+                                (scene.types, scene.moving, scene.solids))
     calls, capacity = {}, {}
     for m, r in VARIANTS:
       cfg = copy.deepcopy(run.config.model)
@@ -116,21 +139,10 @@ def _teacher(run, trajectories):
                for i in range(0, len(windows), 5)]
       densest = windows[5 * int(np.argmax(sizes)), -1]
       nbrs = graph.rounded_up(graph.allocate(spec, densest, extra_capacity=4))
-
-      @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-      def steps(predictor, spec, radius, params, windows, nbrs):
-        def body(nb, w):
-          nb = graph.update(spec, w[-1], nb)
-          senders, receivers = graph.edges(nb, w.shape[-2])
-          g = simulator.Graph(w, types, moving, senders, receivers, solids)
-          nxt, _, _ = simulator.step(predictor, params, g, prob.context,
-                                     radius, True)
-          return nb, (nxt.sum(), nb.did_buffer_overflow)
-        _, (out, overflow) = jax.lax.scan(body, nbrs, windows)
-        return out.sum(), jnp.any(overflow)
-
-      call = functools.partial(steps, simulator.ModelPredictor(model), spec,
-                               r, params, windows, nbrs)
+      call = functools.partial(_teacher_steps,
+                               simulator.ModelPredictor(model), spec, r,
+                               params, windows, scene_arrays, prob.context,
+                               nbrs)
       if bool(call()[1]):
         raise AssertionError(f"M={m} R={r}: the edges overflowed")
       calls[(m, r)] = lambda call=call: call()[0]
