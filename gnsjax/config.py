@@ -21,7 +21,7 @@ CONFIG_KEYS = {
     "model": ("latent_size", "hidden_layers", "num_message_passing_steps",
               "type_embedding_size", "split_first_layer",
               "connectivity_radius", "boundary_particles", "sdf_spacing",
-              "smooth_cutoff", "velocity_gate"),
+              "smooth_cutoff", "velocity_gate", "solid_range"),
     "train": ("seed", "batch_size", "num_steps", "input_frames",
               "frame_stride", "noise_std", "noise_velocity_fraction",
               "fold_noise", "motion_weighting", "pushforward_steps",

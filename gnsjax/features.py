@@ -9,9 +9,10 @@ of the same stride.
 Node features [N, 2 (C - 1) + 3]: the last C - 1 velocities, normalised and
 flattened; then what the node sees of the solids, from the scene's signed
 distance field (``mpm.SDFGrid``: ramp, obstacles and the domain's walls):
-the signed distance phi / R clipped to [-1, 1], and the outward unit normal
-weighted by clip(1 - phi / R, 0, 1), which fades to zero at R so the
-features are continuous. Edge features: the displacement x_sender -
+the signed distance phi / S clipped to [-1, 1], and the outward unit normal
+weighted by clip(1 - phi / S, 0, 1), which fades to zero at S so the
+features are continuous. S is the model's ``solid_range``, by default the
+connectivity radius R. Edge features: the displacement x_sender -
 x_receiver divided by the connectivity radius R [E, 2] and its norm [E, 1].
 The particle type enters the model through a learned embedding.
 """
@@ -57,12 +58,13 @@ def unfold_noise(stats: Stats, noise_std: float) -> Stats:
 
 
 def solid_features(position: jax.Array, solids: geometry.SDFGrid,
-                   radius: float) -> jax.Array:
-  """[N, 3]: phi / R clipped to [-1, 1], and the outward normal [N, 2]
-  weighted by clip(1 - phi / R, 0, 1), at positions [N, 2] (m)."""
+                   solid_range: float) -> jax.Array:
+  """[N, 3]: phi / S clipped to [-1, 1], and the outward normal [N, 2]
+  weighted by clip(1 - phi / S, 0, 1), at positions [N, 2] (m), where S =
+  ``solid_range`` is the range over which the solids are seen (m)."""
   phi, normal = geometry.sample_sdf(solids, position)
-  near = jnp.clip(1.0 - phi / radius, 0.0, 1.0)
-  return jnp.concatenate([jnp.clip(phi / radius, -1.0, 1.0)[:, None],
+  near = jnp.clip(1.0 - phi / solid_range, 0.0, 1.0)
+  return jnp.concatenate([jnp.clip(phi / solid_range, -1.0, 1.0)[:, None],
                           normal * near[:, None]], -1)
 
 
@@ -72,20 +74,21 @@ def velocities(positions: jax.Array) -> jax.Array:
 
 
 def node_features(positions: jax.Array, stats: Stats,
-                  solids: geometry.SDFGrid, radius: float) -> jax.Array:
+                  solids: geometry.SDFGrid, solid_range: float) -> jax.Array:
   """Node features [N, 2 (C - 1) + 3].
 
   Args:
     positions: [C, N, 2] input frames (m).
     stats: normalisation statistics.
     solids: the scene's signed distance field.
-    radius: connectivity radius R (m).
+    solid_range: the range S over which the solids are seen (m): the model's
+      ``solid_range``, by default the connectivity radius R.
   """
   v = (velocities(positions) - stats.vel_mean[None, None]) / stats.vel_std[
       None, None]
   v = jnp.transpose(v, (1, 0, 2)).reshape(positions.shape[1], -1)
-  return jnp.concatenate([v, solid_features(positions[-1], solids, radius)],
-                         -1)
+  return jnp.concatenate(
+      [v, solid_features(positions[-1], solids, solid_range)], -1)
 
 
 def num_node_features(input_frames: int) -> int:

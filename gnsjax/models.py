@@ -151,6 +151,9 @@ class EncodeProcessDecode(nn.Module):
     smooth_cutoff: taper width w of the messages, a fraction of R in [0,
       1]; 0 (default): a hard cutoff, every edge at full weight.
     velocity_gate: add the gate's logit as a last output (see above).
+    solid_range: distance (m) over which the node features see the solids
+      (``gnsjax.features.solid_features``); None: the connectivity radius.
+      Read by ``gnsjax.simulator.predict``, not by the network.
   """
   latent_size: int = 128
   hidden_layers: int = 2
@@ -160,6 +163,7 @@ class EncodeProcessDecode(nn.Module):
   split_first_layer: bool = True
   smooth_cutoff: float = 0.0
   velocity_gate: bool = False
+  solid_range: float | None = None
 
   @nn.compact
   def __call__(self, node_features: jax.Array, particle_type: jax.Array,

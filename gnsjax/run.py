@@ -27,7 +27,8 @@ from mpm import io as mpm_io
 
 # Model settings added after models were shipped, with the value that
 # reproduces a checkpoint written before them.
-MODEL_DEFAULTS = {"smooth_cutoff": 0.0, "velocity_gate": False}
+MODEL_DEFAULTS = {"smooth_cutoff": 0.0, "velocity_gate": False,
+                  "solid_range": None}
 # Model options that add a head a fine-tuning may add to its parent (its
 # parameters start fresh, ``fine_tuning_params``); runs with and without
 # one average (``gnsjax.averaging``).
@@ -70,7 +71,19 @@ def create_model(model_config: ml_collections.ConfigDict
       type_embedding_size=model_config["type_embedding_size"],
       split_first_layer=model_config["split_first_layer"],
       smooth_cutoff=float(model_config["smooth_cutoff"]),
-      velocity_gate=bool(model_config["velocity_gate"]))
+      velocity_gate=bool(model_config["velocity_gate"]),
+      solid_range=_positive_or_none("model.solid_range",
+                                    model_config["solid_range"]))
+
+
+def _positive_or_none(name: str, value) -> float | None:
+  """``value`` as a float, None kept; a clear error unless it is > 0."""
+  if value is None:
+    return None
+  if not float(value) > 0:
+    raise ValueError(f"{name} must be a distance > 0 (m) or None, got "
+                     f"{value!r}")
+  return float(value)
 
 
 def fine_tuning_params(parent_params, fresh_params):

@@ -11,7 +11,7 @@ residual block is the identity). The predictions are the same, checked to
 the bit; only the depth's cost differs.
 
 ``--mode=teacher``: one learned step (neighbour update, features, network,
-constraint) along the MPM's own frames, for each (M, R) of ``VARIANTS``,
+constraint) along the MPM's own frames, for each (M, R) of ``--variants``,
 so that every variant sees the same densities whatever its weights (fresh
 ones). Edge capacity: the densest sampled frame's, on the rollouts' ladder.
 
@@ -43,10 +43,24 @@ _MODE = flags.DEFINE_enum("mode", "padded", ["padded", "teacher"],
 _MODEL = flags.DEFINE_string("model", "experiments/pretrained/small",
                              "the 5-step model")
 _REPEATS = flags.DEFINE_integer("repeats", 3, "timed calls per variant")
+_VARIANTS = flags.DEFINE_list(
+    "variants", ["5:0.03", "10:0.03", "10:0.02", "10:0.022", "8:0.025",
+                 "10:0.025"],
+    "--mode=teacher: M:R pairs (message-passing steps, connectivity radius "
+    "in m); the first is the reference of the ratio column")
 
-# (message-passing steps M, connectivity radius R in m).
-VARIANTS = ((5, 0.03), (10, 0.03), (10, 0.02), (10, 0.022), (8, 0.025),
-            (10, 0.025))
+
+def _parse_variants(items) -> tuple[tuple[int, float], ...]:
+  """((M, R), ...) from ["M:R", ...]; a clear error on a malformed item."""
+  out = []
+  for item in items:
+    try:
+      m, r = item.split(":")
+      out.append((int(m), float(r)))
+    except ValueError:
+      raise ValueError(f"--variants: {item!r} is not M:R, e.g. 5:0.03") \
+          from None
+  return tuple(out)
 
 
 def _deeper(run, steps: int):
@@ -117,8 +131,10 @@ def _teacher(run, trajectories):
     raise ValueError(f"{_MODEL.value}: --mode=teacher times sand-only "
                      "graphs; this model has boundary particles")
   c, k = prob.input_frames, prob.frame_stride
+  variants = _parse_variants(_VARIANTS.value)
+  m0, r0 = variants[0]
   print("| scene | particles | M | R (m) | edge capacity | s / trajectory "
-        "| ratio to M=5, R=0.03 |")
+        f"| ratio to M={m0}, R={r0} |")
   print("|---|---:|---:|---:|---:|---:|---:|")
   for t in trajectories:
     scene = rollout.trajectory_nodes(t, c, k, prob.boundary_particles,
@@ -127,7 +143,7 @@ def _teacher(run, trajectories):
     scene_arrays = jax.tree.map(jnp.asarray,
                                 (scene.types, scene.moving, scene.solids))
     calls, capacity = {}, {}
-    for m, r in VARIANTS:
+    for m, r in variants:
       cfg = copy.deepcopy(run.config.model)
       cfg.num_message_passing_steps = m
       model = run_lib.create_model(cfg)
@@ -151,7 +167,7 @@ def _teacher(run, trajectories):
          timing.time_calls(calls, _REPEATS.value).items()}
     for (m, r), s in f.items():
       print(f"| {t.scene.name} | {t.positions.shape[1]} | {m} | {r} | "
-            f"{capacity[(m, r)]} | {s:.2f} | {s / f[VARIANTS[0]]:.2f} |",
+            f"{capacity[(m, r)]} | {s:.2f} | {s / f[variants[0]]:.2f} |",
             flush=True)
 
 

@@ -36,7 +36,8 @@ def gate(run, t, start):
   senders, receivers = np.nonzero(
       np.sum((last[:, None] - last[None]) ** 2, -1) < problem.radius**2)
   node_f = features.node_features(scene.window, problem.context.stats,
-                                  scene.solids, problem.radius)
+                                  scene.solids,
+                                  run.model.solid_range or problem.radius)
   edge_f = features.edge_features(scene.window[-1], senders, receivers,
                                   problem.radius)
   out = run.model.apply(run.params, node_f, scene.types, edge_f, senders,

@@ -31,6 +31,11 @@ def get_config() -> ml_collections.ConfigDict:
   # The model also scales each step's velocity by a learned factor in
   # (0, 1), so resting sand can stop exactly (gnsjax.models).
   config.model.velocity_gate = False
+  # Distance (m) over which the node features see the solids (the signed
+  # distance, clipped, and the normal fading to zero there); None: the
+  # connectivity radius. It costs nothing: the SDF covers the whole domain.
+  config.model.solid_range = ml_collections.FieldReference(
+      None, field_type=float)
   # None: the dataset's connectivity radius.
   config.model.connectivity_radius = ml_collections.FieldReference(
       None, field_type=float)

@@ -87,7 +87,7 @@ RECIPE_KEYS = ("noise_std", "noise_velocity_fraction", "fold_noise",
 
 # The model options a shipped model may have beyond the small config's: a
 # fine-tuning of it must have the same.
-MODEL_KEYS = ("smooth_cutoff", "velocity_gate")
+MODEL_KEYS = ("smooth_cutoff", "velocity_gate", "solid_range")
 
 
 def demo_config(num_train: int, num_test: int, steps: int,

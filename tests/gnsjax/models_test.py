@@ -217,7 +217,7 @@ class FeaturesTest(absltest.TestCase):
                        np.full_like(x, -0.8)], -1)
     solids = geometry.SDFGrid(jnp.asarray(values, jnp.float32), 0.5)
     got = np.asarray(features.node_features(positions, self.stats, solids,
-                                            radius=0.5))
+                                            solid_range=0.5))
     self.assertEqual(got.shape, (3, features.num_node_features(3)))
     v0 = [(1 - 0.1) / 2, (0 + 0.2) / 4, (2 - 0.1) / 2, (1 + 0.2) / 4]
     v1 = [(0 - 0.1) / 2, (0 + 0.2) / 4] * 2
@@ -229,6 +229,41 @@ class FeaturesTest(absltest.TestCase):
     s1 = [-0.6, 0.6, -0.8]
     s2 = [0.2, 0.8 * 0.6, 0.8 * -0.8]
     np.testing.assert_allclose(got, [v0 + s0, v1 + s1, v1 + s2], atol=1e-6)
+
+  def test_predict_sees_the_solids_over_the_models_solid_range(self):
+    # phi = 0.6 x - 0.8 y + 0.3 as above; the particle at (2.0, 1.0) has
+    # phi = 0.7: beyond R = 0.5 (no normal), within S = 1.0 (weight 0.3).
+    x, y = np.meshgrid(np.arange(9) * 0.5, np.arange(5) * 0.5, indexing="ij")
+    values = np.stack([0.6 * x - 0.8 * y + 0.3, np.full_like(x, 0.6),
+                       np.full_like(x, -0.8)], -1)
+    solids = geometry.SDFGrid(jnp.asarray(values, jnp.float32), 0.5)
+    positions = jnp.array([[[2.0, 1.0], [0.2, 0.9]]] * 3)
+    g = simulator.Graph(positions, jnp.zeros(2, jnp.int32),
+                        jnp.ones(2, bool), jnp.array([0, 1]),
+                        jnp.array([1, 0]), solids)
+    ctx = simulator.Context(self.stats)
+    seen = lambda s: features.node_features(positions, self.stats, solids, s)
+    np.testing.assert_allclose(seen(1.0)[0, -3:], [0.7, 0.18, -0.24],
+                               atol=1e-6)
+    np.testing.assert_allclose(seen(0.5)[0, -3:], [1.0, 0.0, 0.0], atol=1e-6)
+    edge_f = features.edge_features(positions[-1], g.senders, g.receivers,
+                                    0.5)
+    kwargs = dict(latent_size=8, num_message_passing_steps=1,
+                  type_embedding_size=2)
+    params = models.init_params(models.EncodeProcessDecode(**kwargs),
+                                jax.random.key(0), seen(0.5).shape[-1])
+    for solid_range, expected_range in ((None, 0.5), (1.0, 1.0)):
+      model = models.EncodeProcessDecode(solid_range=solid_range, **kwargs)
+      want = model.apply(params, seen(expected_range), g.particle_type,
+                         edge_f, g.senders, g.receivers)
+      np.testing.assert_allclose(
+          simulator.predict(model, params, g, ctx, radius=0.5), want,
+          atol=1e-6)
+    far = models.EncodeProcessDecode(solid_range=1.0, **kwargs)
+    near = models.EncodeProcessDecode(**kwargs)
+    self.assertGreater(
+        np.abs(simulator.predict(far, params, g, ctx, 0.5)
+               - simulator.predict(near, params, g, ctx, 0.5)).max(), 1e-4)
 
   def test_edge_features_by_hand(self):
     position = jnp.array([[0.0, 0.0], [0.3, 0.4]])

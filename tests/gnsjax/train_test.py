@@ -341,8 +341,20 @@ class TrainTest(fixtures.TinyRunTestCase):
     stored = checkpoint.read_config(mngr, 2)
     mngr.close()
     del stored["model"]["smooth_cutoff"]
+    del stored["model"]["solid_range"]
     config_lib.check_compatible(stored, config)
-    self.assertEqual(run_lib.create_model(stored["model"]).smooth_cutoff, 0)
+    model = run_lib.create_model(stored["model"])
+    self.assertEqual(model.smooth_cutoff, 0)
+    self.assertIsNone(model.solid_range)
+
+  def test_solid_range_must_be_a_positive_distance(self):
+    config = fixtures.tiny_config(num_steps=2)
+    config.model.solid_range = 0.06
+    self.assertEqual(run_lib.create_model(config.model).solid_range, 0.06)
+    for bad in (0.0, -0.03):
+      config.model.solid_range = bad
+      with self.assertRaisesRegex(ValueError, "model.solid_range must be"):
+        run_lib.create_model(config.model)
 
 
 class ProblemTest(absltest.TestCase):
