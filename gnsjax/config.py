@@ -61,8 +61,10 @@ def check_config(config) -> None:
       raise InputError(f"config.{section}: missing key(s) "
                        f"{sorted(set(keys) - present)}")
   for (section, key), (kind, lower, upper) in RANGES.items():
-    _check_value(f"config.{section}.{key}", config[section][key], kind,
-                 lower, upper)
+    value = config[section][key]
+    if value is None and (section, key) in OPTIONAL:
+      continue
+    _check_value(f"config.{section}.{key}", value, kind, lower, upper)
   if config.train.lr_min > config.train.lr_init:
     raise InputError(f"config.train.lr_min = {config.train.lr_min} is above "
                      f"config.train.lr_init = {config.train.lr_init}; "
@@ -76,6 +78,7 @@ RANGES = {
     ("model", "num_message_passing_steps"): (int, 1, None),
     ("model", "type_embedding_size"): (int, 1, None),
     ("model", "smooth_cutoff"): (float, 0.0, 1.0),
+    ("model", "solid_range"): (float, 1e-12, None),
     ("train", "seed"): (int, 0, None),
     ("train", "batch_size"): (int, 1, None),
     ("train", "num_steps"): (int, 1, None),
@@ -108,6 +111,8 @@ RANGES = {
     ("eval", "rollout_steps"): (int, 1, None),
     ("eval", "num_rollouts"): (int, 0, None),
 }
+# Keys of ``RANGES`` whose None stands for a default.
+OPTIONAL = {("model", "solid_range")}
 
 
 def _check_value(where: str, value, kind: type, lower, upper) -> None:

@@ -72,18 +72,7 @@ def create_model(model_config: ml_collections.ConfigDict
       split_first_layer=model_config["split_first_layer"],
       smooth_cutoff=float(model_config["smooth_cutoff"]),
       velocity_gate=bool(model_config["velocity_gate"]),
-      solid_range=_positive_or_none("model.solid_range",
-                                    model_config["solid_range"]))
-
-
-def _positive_or_none(name: str, value) -> float | None:
-  """``value`` as a float, None kept; a clear error unless it is > 0."""
-  if value is None:
-    return None
-  if not float(value) > 0:
-    raise ValueError(f"{name} must be a distance > 0 (m) or None, got "
-                     f"{value!r}")
-  return float(value)
+      solid_range=model_config["solid_range"])
 
 
 def fine_tuning_params(parent_params, fresh_params):

@@ -197,6 +197,15 @@ class VelocityGateTest(absltest.TestCase):
                                atol=1e-6)
 
 
+def _linear_sdf() -> geometry.SDFGrid:
+  """A linear SDF on a 0.5 m grid (bilinear interpolation is exact):
+  phi = 0.6 x - 0.8 y + 0.3, outward normal (0.6, -0.8)."""
+  x, y = np.meshgrid(np.arange(9) * 0.5, np.arange(5) * 0.5, indexing="ij")
+  values = np.stack([0.6 * x - 0.8 * y + 0.3, np.full_like(x, 0.6),
+                     np.full_like(x, -0.8)], -1)
+  return geometry.SDFGrid(jnp.asarray(values, jnp.float32), 0.5)
+
+
 class FeaturesTest(absltest.TestCase):
 
   def setUp(self):
@@ -210,12 +219,7 @@ class FeaturesTest(absltest.TestCase):
     positions = jnp.array([[[0.5, 0.5], [0.2, 0.9], [1.0, 1.0]],
                            [[1.5, 0.5], [0.2, 0.9], [1.0, 1.0]],
                            [[3.5, 1.5], [0.2, 0.9], [1.0, 1.0]]])
-    # A linear SDF on a 0.5 m grid (bilinear interpolation is exact):
-    # phi = 0.6 x - 0.8 y + 0.3, outward normal (0.6, -0.8).
-    x, y = np.meshgrid(np.arange(9) * 0.5, np.arange(5) * 0.5, indexing="ij")
-    values = np.stack([0.6 * x - 0.8 * y + 0.3, np.full_like(x, 0.6),
-                       np.full_like(x, -0.8)], -1)
-    solids = geometry.SDFGrid(jnp.asarray(values, jnp.float32), 0.5)
+    solids = _linear_sdf()
     got = np.asarray(features.node_features(positions, self.stats, solids,
                                             solid_range=0.5))
     self.assertEqual(got.shape, (3, features.num_node_features(3)))
@@ -231,12 +235,9 @@ class FeaturesTest(absltest.TestCase):
     np.testing.assert_allclose(got, [v0 + s0, v1 + s1, v1 + s2], atol=1e-6)
 
   def test_predict_sees_the_solids_over_the_models_solid_range(self):
-    # phi = 0.6 x - 0.8 y + 0.3 as above; the particle at (2.0, 1.0) has
-    # phi = 0.7: beyond R = 0.5 (no normal), within S = 1.0 (weight 0.3).
-    x, y = np.meshgrid(np.arange(9) * 0.5, np.arange(5) * 0.5, indexing="ij")
-    values = np.stack([0.6 * x - 0.8 * y + 0.3, np.full_like(x, 0.6),
-                       np.full_like(x, -0.8)], -1)
-    solids = geometry.SDFGrid(jnp.asarray(values, jnp.float32), 0.5)
+    # The particle at (2.0, 1.0) has phi = 0.7: beyond R = 0.5 (no
+    # normal), within S = 1.0 (weight 0.3).
+    solids = _linear_sdf()
     positions = jnp.array([[[2.0, 1.0], [0.2, 0.9]]] * 3)
     g = simulator.Graph(positions, jnp.zeros(2, jnp.int32),
                         jnp.ones(2, bool), jnp.array([0, 1]),

@@ -349,12 +349,15 @@ class TrainTest(fixtures.TinyRunTestCase):
 
   def test_solid_range_must_be_a_positive_distance(self):
     config = fixtures.tiny_config(num_steps=2)
+    config_lib.check_config(config)  # None: the connectivity radius
     config.model.solid_range = 0.06
+    config_lib.check_config(config)
     self.assertEqual(run_lib.create_model(config.model).solid_range, 0.06)
     for bad in (0.0, -0.03):
       config.model.solid_range = bad
-      with self.assertRaisesRegex(ValueError, "model.solid_range must be"):
-        run_lib.create_model(config.model)
+      with self.assertRaisesRegex(config_lib.InputError,
+                                  r"config.model.solid_range = .*allowed: > 0"):
+        config_lib.check_config(config)
 
 
 class ProblemTest(absltest.TestCase):
