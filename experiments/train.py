@@ -44,6 +44,10 @@ _COORDINATOR_WAIT_S = flags.DEFINE_float(
 _INIT_TIMEOUT_S = flags.DEFINE_integer(
     "init_timeout_s", 300, "How long all processes may take to connect (s).",
     lower_bound=1)
+_HEARTBEAT_TIMEOUT_S = flags.DEFINE_integer(
+    "heartbeat_timeout_s", 100, "After the start, a process silent this "
+    "long is declared dead and all processes abort (s; JAX's default; "
+    "raise it on an oversubscribed machine).", lower_bound=1)
 
 
 def main(argv):
@@ -88,7 +92,8 @@ def _train(processes):
   distributed.handshake(processes, _COORDINATOR_WAIT_S.value,
                         _INIT_TIMEOUT_S.value)
   runtime.enable_compilation_cache()
-  distributed.initialize(processes, _INIT_TIMEOUT_S.value)
+  distributed.initialize(processes, _INIT_TIMEOUT_S.value,
+                         _HEARTBEAT_TIMEOUT_S.value)
   # pylint: disable=g-import-not-at-top
   from gnsjax import config as config_lib
   from gnsjax import train

@@ -306,12 +306,15 @@ def handshake(s: Settings, wait_s: float = 60.0, timeout_s: float = 300.0,
     _hello(s, address, flag, wait_s, connect_timeout_s, timeout_s)
 
 
-def initialize(s: Settings, timeout_s: int = 300) -> None:
+def initialize(s: Settings, timeout_s: int = 300,
+               heartbeat_timeout_s: int = 100) -> None:
   """Starts JAX's distributed runtime (nothing alone) and checks that it
   sees ``s.num_processes`` processes with this one at ``s.process_id``.
 
   Must run before JAX touches a device. On CPU the collectives go over
-  gloo.
+  gloo. A process whose heartbeats stop for ``heartbeat_timeout_s``
+  (JAX's default 100 s: dead, or starved of CPU on an oversubscribed
+  machine) is declared dead, and every process aborts (SIGABRT).
 
   Raises:
     InputError: the processes did not all connect within ``timeout_s``
@@ -328,8 +331,10 @@ def initialize(s: Settings, timeout_s: int = 300) -> None:
                        "initialised; call it before importing gnsjax.train")
   jax.config.update("jax_cpu_collectives_implementation", "gloo")
   try:
-    jax.distributed.initialize(s.coordinator, s.num_processes, s.process_id,
-                               initialization_timeout=timeout_s)
+    jax.distributed.initialize(
+        s.coordinator, s.num_processes, s.process_id,
+        initialization_timeout=timeout_s,
+        heartbeat_timeout_seconds=heartbeat_timeout_s)
   except Exception as e:  # pylint: disable=broad-except
     # JAX raises its runtime's error types; the cause is in the text.
     first = str(e).strip().splitlines()[0] if str(e).strip() else repr(e)

@@ -6,6 +6,7 @@ global batch as one process, and must give its losses.
 
 import csv
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -56,7 +57,15 @@ def _train_argv(data: str, workdir: str, num_steps: int) -> list[str]:
           "--config.checkpoint.every_steps=4"]
 
 
-def _start_two(data, workdir, num_steps, port, log_dir):
+def _start_two(data, workdir, num_steps, port, log_dir,
+               heartbeat_timeout_s=900):
+  """The two processes of ``experiments.train``, logging into ``log_dir``.
+
+  The heartbeat timeout is well above JAX's 100 s: in CI once, on a
+  machine about 10 times slower than usual (the reference's first step
+  took 409 s), both processes aborted (SIGABRT), as they do when one
+  misses its heartbeats; the log's end kept only the stack dump.
+  """
   env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu",
              GNSJAX_CACHE_DIR=CACHE)
   procs = []
@@ -65,15 +74,23 @@ def _start_two(data, workdir, num_steps, port, log_dir):
     procs.append(subprocess.Popen(
         _train_argv(data, workdir, num_steps) + [
             f"--coordinator=127.0.0.1:{port}", "--num_processes=2",
-            f"--process_id={i}"],
+            f"--process_id={i}",
+            f"--heartbeat_timeout_s={heartbeat_timeout_s}"],
         env=env, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT))
     log.close()
   return procs
 
 
 def _tail(log_dir):
-  return "\n".join(open(os.path.join(log_dir, f"process{i}.log")).read()[
-      -2000:] for i in range(2))
+  """Each process's errors (glog's E and F lines: the cause of an abort,
+  which a stack dump follows) and the end of its log."""
+  texts = []
+  for i in range(2):
+    text = open(os.path.join(log_dir, f"process{i}.log")).read()
+    errors = re.findall(r"^[EF]\d{4} .*$", text, re.MULTILINE)
+    texts.append(f"process {i}:\n" + "\n".join(errors[-10:]) +
+                 "\n...\n" + text[-1500:])
+  return "\n".join(texts)
 
 
 def _reference(data, workdir, num_steps):
@@ -94,9 +111,11 @@ class TwoProcessTrainingTest(fixtures.TinyRunTestCase):
 
   def test_two_processes_match_one(self):
     steps = 2
+    # One after the other: three JAX processes compiling at once beside
+    # pytest's other worker starve each other on a 2-core machine.
+    want = _reference(self.data, os.path.join(self.dir, "one"), steps)
     workdir = os.path.join(self.dir, "two")
     procs = _start_two(self.data, workdir, steps, _free_port(), self.dir)
-    want = _reference(self.data, os.path.join(self.dir, "one"), steps)
     codes = [p.wait(timeout=600) for p in procs]
     self.assertEqual(codes, [0, 0], _tail(self.dir))
     self.assert_losses_equal(_losses(workdir), want)
@@ -136,6 +155,31 @@ class TwoProcessTrainingTest(fixtures.TinyRunTestCase):
     codes = [p.wait(timeout=600) for p in procs]
     self.assertEqual(codes, [0, 0], _tail(self.dir))
     self.assert_losses_equal(_losses(workdir), want)  # no step twice
+
+
+class HeartbeatTest(fixtures.TinyRunTestCase):
+
+  @pytest.mark.slow
+  def test_a_silent_process_ends_both_after_the_heartbeat_timeout(self):
+    procs = _start_two(self.data, os.path.join(self.dir, "two"), 2,
+                       _free_port(), self.dir, heartbeat_timeout_s=5)
+    for p in procs:
+      self.addCleanup(p.kill)
+    log = os.path.join(self.dir, "process1.log")
+    deadline = time.time() + 300
+    while "Gloo" not in open(log).read():  # the runtime has started
+      self.assertLess(time.time(), deadline, _tail(self.dir))
+      self.assertIsNone(procs[1].poll(), _tail(self.dir))
+      time.sleep(0.1)
+    procs[1].send_signal(signal.SIGSTOP)
+    try:
+      code0 = procs[0].wait(timeout=60)  # 5 s of silence, not JAX's 100
+    finally:
+      procs[1].send_signal(signal.SIGCONT)
+    self.assertEqual(code0, -signal.SIGABRT, _tail(self.dir))
+    self.assertIn("stopped sending heartbeats", _tail(self.dir))
+    self.assertFalse(os.path.exists(os.path.join(self.dir, "two",
+                                                 "checkpoints", "2")))
 
 
 class SettingsTest(parameterized.TestCase):
