@@ -18,8 +18,9 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(PY) -m experiments.demo --out=$(OUT)/demo
 
+# --durations: the log of every run (CI's too) names the slowest tests.
 test: $(STAMP)
-	$(PY) -m pytest -n 2 -q
+	$(PY) -m pytest -n 2 -q --durations=15
 
 test-all: $(STAMP)
 	$(PY) -m pytest -n 2 -q -m ""
