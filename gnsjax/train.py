@@ -134,7 +134,7 @@ class Trainer:
       params = optax.apply_updates(state.params, updates)
       return (state.replace(step=state.step + 1, params=params,
                             opt_state=opt_state),
-              {"loss": loss, "grad_norm": optax.global_norm(grads)})
+              {"loss": loss, "grad_norm": optax.tree.norm(grads)})
 
     self.prepare = jax.jit(prepare)
     self._shift_target = jax.jit(jax.vmap(

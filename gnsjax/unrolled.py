@@ -73,7 +73,7 @@ def make_train_step(predictor, tx: optax.GradientTransformation,
     state = state.replace(step=state.step + 1, params=params,
                           opt_state=opt_state)
     return state, {"loss": loss,
-                   "grad_norm": optax.global_norm(grads)}, overflow
+                   "grad_norm": optax.tree.norm(grads)}, overflow
   return jax.jit(train_step)
 
 
