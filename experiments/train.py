@@ -47,7 +47,8 @@ _INIT_TIMEOUT_S = flags.DEFINE_integer(
 _HEARTBEAT_TIMEOUT_S = flags.DEFINE_integer(
     "heartbeat_timeout_s", 100, "After the start, a process silent this "
     "long is declared dead and all processes abort (s; JAX's default; "
-    "raise it on an oversubscribed machine).", lower_bound=1)
+    "raise it where a process may stall, e.g. an oversubscribed "
+    "machine).", lower_bound=1)
 
 
 def main(argv):

@@ -313,8 +313,8 @@ def initialize(s: Settings, timeout_s: int = 300,
 
   Must run before JAX touches a device. On CPU the collectives go over
   gloo. A process whose heartbeats stop for ``heartbeat_timeout_s``
-  (JAX's default 100 s: dead, or starved of CPU on an oversubscribed
-  machine) is declared dead, and every process aborts (SIGABRT).
+  (JAX's default 100 s: it died, or stalls) is declared dead, and every
+  process aborts (SIGABRT).
 
   Raises:
     InputError: the processes did not all connect within ``timeout_s``
