@@ -153,7 +153,8 @@ class EncodeProcessDecode(nn.Module):
     velocity_gate: add the gate's logit as a last output (see above).
     solid_range: distance (m) over which the node features see the solids
       (``gnsjax.features.solid_features``); None: the connectivity radius.
-      Read by ``gnsjax.simulator.predict``, not by the network.
+      Read through ``seen_solid_range`` by whoever builds the node
+      features (``gnsjax.simulator.predict``), not by the network.
   """
   latent_size: int = 128
   hidden_layers: int = 2
@@ -164,6 +165,11 @@ class EncodeProcessDecode(nn.Module):
   smooth_cutoff: float = 0.0
   velocity_gate: bool = False
   solid_range: float | None = None
+
+  def seen_solid_range(self, radius: float) -> float:
+    """S (m), the distance over which the node features see the solids:
+    ``solid_range``, or the connectivity radius ``radius`` (m)."""
+    return self.solid_range or radius
 
   @nn.compact
   def __call__(self, node_features: jax.Array, particle_type: jax.Array,

@@ -52,7 +52,7 @@ def predict(model: models.EncodeProcessDecode, params, graph: Graph,
   """Normalised accelerations [N, 2] of a window (a gated model's gate
   applied)."""
   node_f = features.node_features(graph.positions, context.stats,
-                                  graph.solids, model.solid_range or radius)
+                                  graph.solids, model.seen_solid_range(radius))
   edge_f = features.edge_features(graph.positions[-1], graph.senders,
                                   graph.receivers, radius)
   out = model.apply(params, node_f, graph.particle_type, edge_f,

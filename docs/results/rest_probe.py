@@ -37,7 +37,7 @@ def gate(run, t, start):
       np.sum((last[:, None] - last[None]) ** 2, -1) < problem.radius**2)
   node_f = features.node_features(scene.window, problem.context.stats,
                                   scene.solids,
-                                  run.model.solid_range or problem.radius)
+                                  run.model.seen_solid_range(problem.radius))
   edge_f = features.edge_features(scene.window[-1], senders, receivers,
                                   problem.radius)
   out = run.model.apply(run.params, node_f, scene.types, edge_f, senders,
